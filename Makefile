@@ -1,0 +1,32 @@
+# Two commands that work on a fresh clone: `make demo` and `make test`.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-slow bench install clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p out
+	$(PY) -m layerstack_jax.cli predict examples/varnished_painting.toml --wavelengths 380:780:5 --geometry 45/0 -o out/varnished_painting_45-0.csv --plot out/varnished_painting_45-0.png
+	$(PY) -m layerstack_jax.cli predict examples/thin_film_on_metal.toml --wavelengths 380:780:5 --geometry specular:30 -o out/thin_film_on_metal.csv --plot out/thin_film_on_metal.png
+
+test: $(STAMP)
+	$(PY) -m pytest -n 2 -q
+
+test-slow: $(STAMP)
+	$(PY) -m pytest -n 2 -q -m slow
+
+bench: $(STAMP)
+	$(PY) -m benchmarks
+
+clean:
+	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -1,0 +1,135 @@
+r"""Coherent film packets: the Rouard / Airy recursion (Hirayama et al. eqs. 1–6, Appendix A).
+
+A *packet* is a run of zero or more coherent films between two semi-infinite media (the
+ambient and the exit medium, or two thick incoherent layers of a mixed stack). Amplitudes add
+with phase inside it. The recursion runs from the exit medium back to the incidence medium,
+
+.. math::
+    \gamma \leftarrow \frac{r_j + \gamma\, e^{2i\phi_j}}{1 + r_j \gamma\, e^{2i\phi_j}},\qquad
+    \tau \leftarrow \frac{t_j\, \tau\, e^{i\phi_j}}{1 + r_j \gamma\, e^{2i\phi_j}},\qquad
+    \phi_j = \frac{2\pi}{\lambda} q_j d_j,
+
+(Hirayama eqs. 3–4, 24). Because :math:`\operatorname{Im} q_j \ge 0`, :math:`|e^{i\phi_j}| \le 1`:
+a 10 µm metal film makes the phase factor underflow to 0, which gives the reflectance of the
+bulk metal instead of an overflow (PHYSICS.md, trap 5). A forward transfer matrix would
+contain :math:`e^{-i\phi_j}` and overflow there.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Sequence
+
+import jax.numpy as jnp
+from jax import lax
+
+from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, safe_divide
+
+__all__ = ["PacketIntensities", "packet_amplitudes", "packet_intensities"]
+
+# Packets with more films than this run through lax.scan (compile time independent of the
+# number of films); shorter ones are unrolled, which XLA fuses better.
+_SCAN_THRESHOLD = 8
+
+
+class PacketIntensities(NamedTuple):
+    """Intensity reflectances and transmittances of a packet, per polarization.
+
+    Each field is shaped ``(2, *batch)`` with the polarization axis ``(s, p)`` first.
+    ``*_front``: light incident from the first medium of the packet; ``*_back``: from the last.
+    """
+
+    R_front: object
+    T_front: object
+    R_back: object
+    T_back: object
+
+
+def _rouard(r, t, phase):
+    """Rouard recursion over interfaces ``r[0..F]``, ``t[0..F]`` and film phases ``phase[0..F-1]``.
+
+    Shapes: r, t ``(F+1, 2, *B)``, phase ``(F, 1, *B)``. Returns composite ``(gamma, tau)``.
+    """
+    n_films = phase.shape[0]
+    gamma, tau = r[-1], t[-1]
+    if n_films == 0:
+        return gamma, tau
+
+    def step(carry, x):
+        gamma, tau = carry
+        r_j, t_j, phi_j = x
+        e1 = jnp.exp(1j * phi_j)
+        e2 = e1 * e1
+        den = 1.0 + r_j * gamma * e2
+        return ((r_j + gamma * e2) / den, t_j * tau * e1 / den), None
+
+    xs = (r[:-1][::-1], t[:-1][::-1], phase[::-1])
+    if n_films <= _SCAN_THRESHOLD:
+        carry = (gamma, tau)
+        for j in range(n_films):
+            carry, _ = step(carry, (xs[0][j], xs[1][j], xs[2][j]))
+        return carry
+    (gamma, tau), _ = lax.scan(step, (gamma, tau), xs)
+    return gamma, tau
+
+
+def packet_amplitudes(n: Sequence, d: Sequence, s, wavelength):
+    r"""Composite amplitude reflection and transmission coefficients :math:`(\gamma, \tau)` of a
+    coherent packet illuminated from its first medium (Hirayama et al. eqs. 1–4).
+
+    Args:
+        n: complex indices of the media ``[incidence, film_1, …, film_F, exit]``, each
+            broadcastable to the batch shape ``*B`` (typically ``(*angle, wl)``).
+        d: thicknesses of the F films in nm, each broadcastable to ``*B``.
+        s: Snell invariant, broadcastable to ``*B``.
+        wavelength: vacuum wavelength in nm, broadcastable to ``*B``.
+
+    Returns:
+        ``(gamma, tau, q)``: amplitudes shaped ``(2, *B)`` (polarization ``(s, p)`` first) and
+        the normal wavevectors ``q`` of all media, shaped ``(F + 2, *B)``.
+    """
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, *d, s, wavelength)))
+    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in n])
+    n_arr = n_arr.astype(jnp.result_type(n_arr.dtype, jnp.complex64))
+    q = normal_wavevector(n_arr, s)
+    r, t = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, F+1, *B)
+    r, t = jnp.moveaxis(r, 0, 1), jnp.moveaxis(t, 0, 1)  # (F+1, 2, *B)
+    if len(d):
+        d_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
+        phase = (2 * jnp.pi / wavelength) * q[1:-1] * d_arr  # (F, *B)
+        phase = phase[:, None]
+    else:
+        phase = jnp.zeros((0, 1, *shape), q.dtype)
+    gamma, tau = _rouard(r, t, phase)
+    return gamma, tau, q
+
+
+def packet_intensities(n: Sequence, d: Sequence, s, wavelength, *, both_sides: bool = True):
+    r"""Intensity reflectance and transmittance of a coherent packet from both sides.
+
+    :math:`R = |\gamma|^2` and :math:`T = |\tau|^2\,\Phi_\text{exit} / \Phi_\text{incidence}` with the
+    power fluxes of :func:`layerstack_jax._fresnel.power_flux` (Hirayama eqs. 5–6 per polarization,
+    before any averaging). ``T`` is the power that enters the exit medium, also when that medium
+    absorbs (then it is absorbed there). Light arriving at grazing incidence or from an
+    evanescent medium has zero flux; its ``T`` is set to 0.
+
+    The back side (light from the last medium) is the same recursion on the reversed packet;
+    with an absorbing film ``R_back != R_front`` while ``T_back == T_front`` for real outer
+    media (reciprocity, Simonot eq. 44).
+
+    Returns:
+        :class:`PacketIntensities` with fields shaped ``(2, *B)``; the ``*_back`` fields are
+        ``None`` when ``both_sides`` is false.
+    """
+    gamma, tau, q = packet_amplitudes(n, d, s, wavelength)
+    n_first = jnp.asarray(n[0]).astype(q.dtype)
+    n_last = jnp.asarray(n[-1]).astype(q.dtype)
+    flux_first = power_flux(n_first, q[0])
+    flux_last = power_flux(n_last, q[-1])
+    R_f = jnp.abs(gamma) ** 2
+    T_f = safe_divide(jnp.abs(tau) ** 2 * flux_last, flux_first)
+    if not both_sides:
+        return PacketIntensities(R_f, T_f, None, None)
+    gamma_b, tau_b, _ = packet_amplitudes(tuple(n)[::-1], tuple(d)[::-1], s, wavelength)
+    R_b = jnp.abs(gamma_b) ** 2
+    T_b = safe_divide(jnp.abs(tau_b) ** 2 * flux_first, flux_last)
+    return PacketIntensities(R_f, T_f, R_b, T_b)

@@ -1,0 +1,111 @@
+r"""Interface optics: branch-safe normal wavevector and Fresnel amplitude coefficients.
+
+Conventions (fixed here for the whole package)
+------------------------------------------------
+* Time dependence :math:`e^{-i\omega t}`; complex index :math:`\tilde n = n + ik` with
+  :math:`k \ge 0` for an absorbing medium.
+* The angle travels through a stack as the Snell invariant :math:`s = n_0 \sin\theta_0`
+  (Simonot et al. eqs. 1, 24). In medium *j* we never form :math:`\theta_j` itself; we use the
+  *normal wavevector ratio* :math:`q_j = \tilde n_j \cos\theta_j = \sqrt{\tilde n_j^2 - s^2}`.
+* Branch (PHYSICS.md, trap 1): the root with :math:`\operatorname{Im} q \ge 0` (a forward wave that
+  decays, or an evanescent wave beyond the critical angle) and :math:`\operatorname{Re} q \ge 0`
+  when :math:`\operatorname{Im} q = 0`.
+* Fresnel amplitudes follow Born & Wolf / the ``tmm`` package: for p the ratio of electric fields
+  with the sign convention in which :math:`r_s = r_p` at normal incidence.
+* Polarization axis: index 0 is *s* (TE, perpendicular), index 1 is *p* (TM, parallel).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = [
+    "normal_wavevector",
+    "fresnel_amplitudes",
+    "power_flux",
+    "safe_divide",
+]
+
+
+@jax.custom_jvp
+def _forward_sqrt(z):
+    w = jnp.sqrt(z)
+    # Principal root has Re >= 0; flip to the decaying branch when Im < 0 (this also repairs
+    # sqrt(-x - 0j) = -i sqrt(x), a signed-zero artefact on the branch cut).
+    return jnp.where(jnp.imag(w) < 0, -w, w)
+
+
+@_forward_sqrt.defjvp
+def _forward_sqrt_jvp(primals, tangents):
+    (z,), (dz,) = primals, tangents
+    w = _forward_sqrt(z)
+    # d sqrt(z) = dz / (2 sqrt z). At the branch point z = 0 (exactly the critical angle) the
+    # derivative is infinite; we return 0 there instead of inf/NaN (PHYSICS.md, trap 3).
+    zero = w == 0
+    w_safe = jnp.where(zero, jnp.ones_like(w), w)
+    return w, jnp.where(zero, jnp.zeros_like(w), dz / (2 * w_safe))
+
+
+def normal_wavevector(n, s):
+    r"""Normal wavevector ratio :math:`q = \tilde n \cos\theta = \sqrt{\tilde n^2 - s^2}`.
+
+    Args:
+        n: complex index of the medium, any shape.
+        s: Snell invariant :math:`n_0 \sin\theta_0` (real), broadcastable against ``n``.
+
+    Returns:
+        Complex array with :math:`\operatorname{Im} q \ge 0` (forward, decaying wave; purely
+        imaginary past the critical angle of a lossless medium).
+    """
+    n = jnp.asarray(n)
+    n = n.astype(jnp.result_type(n.dtype, jnp.complex64))
+    return _forward_sqrt(n * n - jnp.asarray(s) ** 2)
+
+
+def fresnel_amplitudes(n_i, q_i, n_f, q_f):
+    r"""Fresnel amplitude coefficients of the interface from medium *i* into medium *f*.
+
+    .. math::
+        r_s = \frac{q_i - q_f}{q_i + q_f},\quad t_s = \frac{2 q_i}{q_i + q_f},\quad
+        r_p = \frac{\tilde n_f^2 q_i - \tilde n_i^2 q_f}{\tilde n_f^2 q_i + \tilde n_i^2 q_f},\quad
+        t_p = \frac{2 \tilde n_i \tilde n_f q_i}{\tilde n_f^2 q_i + \tilde n_i^2 q_f}
+
+    (the intensity forms are Simonot et al. eqs. 2–3; the amplitudes are the r_j, t_j of
+    Hirayama et al. eqs. 1–4).
+
+    Returns:
+        ``(r, t)``, each stacked on a new leading polarization axis ``(s, p)``.
+    """
+    a = n_f * n_f * q_i
+    b = n_i * n_i * q_f
+    den_s = q_i + q_f
+    den_p = a + b
+    # den = 0 only for a non-interface (both q = 0 at grazing incidence in equal media);
+    # guard so that the untaken branch never produces NaN (trap 3).
+    den_s_safe = jnp.where(den_s == 0, 1.0, den_s)
+    den_p_safe = jnp.where(den_p == 0, 1.0, den_p)
+    r_s = jnp.where(den_s == 0, -1.0 + 0j, (q_i - q_f) / den_s_safe)
+    t_s = jnp.where(den_s == 0, 0j, 2 * q_i / den_s_safe)
+    r_p = jnp.where(den_p == 0, -1.0 + 0j, (a - b) / den_p_safe)
+    t_p = jnp.where(den_p == 0, 0j, 2 * n_i * n_f * q_i / den_p_safe)
+    return jnp.stack([r_s, r_p]), jnp.stack([t_s, t_p])
+
+
+def power_flux(n, q):
+    r"""Normal component of the time-averaged Poynting vector per unit :math:`|E|^2`, up to a
+    common constant, for s and p (stacked on a leading axis).
+
+    s: :math:`\operatorname{Re}(q)`; p: :math:`\operatorname{Re}(\tilde n\,\overline{\cos\theta})`
+    with :math:`\cos\theta = q/\tilde n` (the ``tmm`` convention). The transmittance of a packet
+    is :math:`|t|^2` times the ratio of the fluxes of the exit and incidence media
+    (Hirayama et al. eq. 6 for real media).
+    """
+    cos = q / n
+    return jnp.stack([jnp.real(q), jnp.real(n * jnp.conj(cos))])
+
+
+def safe_divide(num, den):
+    """``num / den`` where ``den > 0``, else 0 — with a NaN-free gradient in both branches."""
+    ok = den > 0
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)

@@ -1,0 +1,150 @@
+r"""Dispersion models: the complex index :math:`\tilde n(\lambda) = n + ik` of a medium.
+
+Every model is an equinox module (a pytree: its coefficients can be fitted) whose call
+``model(wavelength_nm)`` returns the complex index on the given grid, or a scalar when the
+index does not depend on wavelength — so that nothing wavelength-independent is ever
+recomputed per wavelength.
+
+Coefficients of Cauchy and Sellmeier models are quoted with λ in **micrometres**, as in the
+literature and the refractiveindex.info database; the call itself takes nanometres.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Union
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._validate import LayerstackError, check_finite, check_nonnegative, is_concrete
+
+__all__ = ["Material", "Index", "Cauchy", "Sellmeier", "Tabulated", "as_material"]
+
+
+class Material(eqx.Module):
+    """Base class: a callable ``wavelength_nm -> complex index`` (n + ik, k >= 0)."""
+
+    def __call__(self, wavelength_nm):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def _complex(n, k):
+    n = jnp.asarray(n)
+    k = jnp.asarray(k)
+    return n + 1j * k
+
+
+class Index(Material):
+    """A given index: scalars (constant) or arrays already sampled on the model's wavelength grid.
+
+    Attributes:
+        n: real part, dimensionless; scalar or array broadcastable to ``(*batch, wl)``.
+        k: extinction coefficient (>= 0), same shapes.
+    """
+
+    n: object
+    k: object = 0.0
+
+    def __check_init__(self):
+        check_finite("Index.n", self.n)
+        check_nonnegative("Index.k", self.k, "(extinction coefficient) must be >= 0 (convention n + ik)")
+
+    def __call__(self, wavelength_nm):
+        return _complex(self.n, self.k)
+
+
+class Cauchy(Material):
+    r"""Cauchy dispersion :math:`n = A + B/\lambda^2 + C/\lambda^4` (λ in µm; B in µm², C in µm⁴),
+    with a constant extinction coefficient k."""
+
+    A: object
+    B: object = 0.0
+    C: object = 0.0
+    k: object = 0.0
+
+    def __check_init__(self):
+        check_nonnegative("Cauchy.k", self.k)
+
+    def __call__(self, wavelength_nm):
+        lam2 = (jnp.asarray(wavelength_nm) * 1e-3) ** 2
+        return _complex(self.A + self.B / lam2 + self.C / lam2**2, self.k)
+
+
+class Sellmeier(Material):
+    r"""Sellmeier dispersion :math:`n^2 = 1 + \sum_i B_i \lambda^2 / (\lambda^2 - C_i)`
+    (λ in µm, :math:`C_i` in µm²), with a constant extinction coefficient k."""
+
+    B: object
+    C: object
+    k: object = 0.0
+
+    def __check_init__(self):
+        if is_concrete(self.B) and np.shape(self.B) != np.shape(self.C):
+            raise LayerstackError("Sellmeier.B and Sellmeier.C must have the same length")
+        check_nonnegative("Sellmeier.k", self.k)
+
+    def __call__(self, wavelength_nm):
+        lam2 = (jnp.asarray(wavelength_nm) * 1e-3) ** 2
+        B = jnp.atleast_1d(jnp.asarray(self.B))
+        C = jnp.atleast_1d(jnp.asarray(self.C))
+        n2 = 1.0 + jnp.sum(B[:, None] * lam2 / (lam2 - C[:, None]), axis=0)
+        return _complex(jnp.sqrt(n2), self.k)
+
+
+class Tabulated(Material):
+    """Tabulated (n, k) linearly interpolated on wavelength (differentiable in the table values).
+
+    Raises a :class:`LayerstackError` when asked for a wavelength outside the table: data are
+    never silently extrapolated.
+
+    Attributes:
+        wavelength_nm: increasing table wavelengths, nm (static, not fitted).
+        n, k: table values, same length.
+    """
+
+    wavelength_nm: np.ndarray = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))
+    n: object
+    k: object = None
+    name: str = eqx.field(static=True, default="tabulated")
+
+    def __check_init__(self):
+        wl = np.asarray(self.wavelength_nm)
+        if wl.ndim != 1 or wl.size < 2 or np.any(np.diff(wl) <= 0):
+            raise LayerstackError(f"{self.name}: table wavelengths must be strictly increasing (>= 2 points)")
+        for field, v in (("n", self.n), ("k", self.k)):
+            if v is not None and is_concrete(v) and np.shape(v) != wl.shape:
+                raise LayerstackError(f"{self.name}: column {field} has {np.size(v)} values for {wl.size} wavelengths")
+        check_finite(f"{self.name}.n", self.n)
+        check_nonnegative(f"{self.name}.k", self.k)
+
+    def __call__(self, wavelength_nm):
+        table = np.asarray(self.wavelength_nm)
+        if is_concrete(wavelength_nm):
+            w = np.asarray(wavelength_nm)
+            if np.any(w < table[0] - 1e-9) or np.any(w > table[-1] + 1e-9):
+                raise LayerstackError(
+                    f"{self.name}: wavelengths {w.min():g}–{w.max():g} nm outside the data range "
+                    f"{table[0]:g}–{table[-1]:g} nm"
+                )
+        x = jnp.asarray(wavelength_nm)
+        n = jnp.interp(x, table, jnp.asarray(self.n))
+        k = 0.0 if self.k is None else jnp.interp(x, table, jnp.asarray(self.k))
+        return _complex(n, k)
+
+
+MaterialLike = Union[Material, complex, float, int, Callable]
+
+
+def as_material(x) -> Material:
+    """Promote a number (or complex number n + ik) to :class:`Index`; pass materials through."""
+    if isinstance(x, Material):
+        return x
+    if isinstance(x, complex):
+        return Index(x.real, x.imag)
+    if callable(x):
+        raise LayerstackError(f"unsupported material object {x!r}: use a layerstack_jax Material")
+    a = jnp.asarray(x) if not isinstance(x, (float, int)) else x
+    if jnp.iscomplexobj(a):
+        return Index(jnp.real(a), jnp.imag(a))
+    return Index(a)

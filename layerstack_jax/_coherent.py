@@ -51,8 +51,6 @@ def _rouard(r, t, phase):
     """
     n_films = phase.shape[0]
     gamma, tau = r[-1], t[-1]
-    if n_films == 0:
-        return gamma, tau
 
     def step(carry, x):
         gamma, tau = carry
@@ -87,18 +85,21 @@ def packet_amplitudes(n: Sequence, d: Sequence, s, wavelength):
         ``(gamma, tau, q)``: amplitudes shaped ``(2, *B)`` (polarization ``(s, p)`` first) and
         the normal wavevectors ``q`` of all media, shaped ``(F + 2, *B)``.
     """
-    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, *d, s, wavelength)))
-    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in n])
+    # Fresnel terms only depend on the indices and s: keep them at that (often
+    # wavelength-free) shape, so that nothing wavelength-independent is computed per wavelength.
+    shape_n = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, s)))
+    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape_n) for x in n])
     n_arr = n_arr.astype(jnp.result_type(n_arr.dtype, jnp.complex64))
     q = normal_wavevector(n_arr, s)
     r, t = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, F+1, *B)
     r, t = jnp.moveaxis(r, 0, 1), jnp.moveaxis(t, 0, 1)  # (F+1, 2, *B)
-    if len(d):
-        d_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
-        phase = (2 * jnp.pi / wavelength) * q[1:-1] * d_arr  # (F, *B)
-        phase = phase[:, None]
-    else:
-        phase = jnp.zeros((0, 1, *shape), q.dtype)
+    if not d:
+        return r[0], t[0], q
+    shape = jnp.broadcast_shapes(shape_n, *(jnp.shape(x) for x in d), jnp.shape(wavelength))
+    d_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
+    phase = ((2 * jnp.pi / wavelength) * q[1:-1] * d_arr)[:, None]  # (F, 1, *B)
+    r = jnp.broadcast_to(r, (r.shape[0], 2, *shape))
+    t = jnp.broadcast_to(t, (t.shape[0], 2, *shape))
     gamma, tau = _rouard(r, t, phase)
     return gamma, tau, q
 

@@ -16,11 +16,12 @@ from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from ._quadrature import DEFAULT_NODES, hemispherical_rule
 from ._response import natural, stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, Substrate, resolve
-from ._validate import LayerstackError
+from ._validate import LayerstackError, is_concrete
 
 __all__ = [
     "Response",
@@ -101,6 +102,8 @@ def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
         n_from, others = rs.n[-1], [rs.n[i] for i in thick[:-1]]
     else:
         raise LayerstackError(f"side must be 'front' or 'back', got {side!r}")
+    # at least (1,) so that the node axis stays in front of the wavelength axis
+    n_from = np.atleast_1d(np.real(n_from)) if is_concrete(n_from) else jnp.atleast_1d(jnp.real(n_from))
     mu, w = hemispherical_rule(n_from, others, nodes)
     s = jnp.real(jnp.asarray(n_from)) * jnp.sqrt(mu)
     out = stack_intensities(rs, s, both_sides=(side == "back"))

@@ -30,9 +30,11 @@ class Material(eqx.Module):
 
 
 def _complex(n, k):
-    n = jnp.asarray(n)
-    k = jnp.asarray(k)
-    return n + 1j * k
+    """n + ik; stays a numpy constant when both are concrete, so that static work (critical
+    angles, segment layout) can be decided at trace time instead of on every call."""
+    if is_concrete((n, k)):
+        return np.asarray(n) + 1j * np.asarray(k)
+    return jnp.asarray(n) + 1j * jnp.asarray(k)
 
 
 class Index(Material):

@@ -25,6 +25,8 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
+from ._validate import is_concrete
+
 __all__ = ["DEFAULT_NODES", "unit_rule", "hemispherical_rule", "plain_gauss_legendre_rule"]
 
 #: Default Gauss–Legendre nodes per segment: ≤ 1e-10 absolute error on the diffuse reflectance
@@ -60,8 +62,21 @@ def hemispherical_rule(n_from, n_thick, nodes: int = DEFAULT_NODES):
         ``(mu, w)`` shaped ``(node, *B)`` with ``node = nodes * (len(n_thick) + 1)``.
     """
     x, w = unit_rule(nodes)
-    n_from = jnp.real(jnp.asarray(n_from))
-    splits = [jnp.clip((jnp.real(jnp.asarray(n)) / n_from) ** 2, 0.0, 1.0) for n in n_thick]
+    if is_concrete((n_from, *n_thick)):
+        # Indices known at trace time: drop split points that cannot bind (n_j >= n_from at every
+        # wavelength) and duplicates, so no nodes are spent on empty segments.
+        n_from_np = np.real(np.asarray(n_from))
+        kept = []
+        for n in n_thick:
+            c = np.clip((np.real(np.asarray(n)) / n_from_np) ** 2, 0.0, 1.0)
+            if np.all(c >= 1.0) or any(np.shape(c) == np.shape(k) and np.array_equal(c, k) for k in kept):
+                continue
+            kept.append(c)
+        splits = kept
+        n_from = n_from_np
+    else:
+        n_from = jnp.real(jnp.asarray(n_from))
+        splits = [jnp.clip((jnp.real(jnp.asarray(n)) / n_from) ** 2, 0.0, 1.0) for n in n_thick]
     shape = jnp.broadcast_shapes(jnp.shape(n_from), *(jnp.shape(c) for c in splits))
     inner = jnp.sort(jnp.stack([jnp.broadcast_to(c, shape) for c in splits]), axis=0) if splits else jnp.zeros((0, *shape))
     edges = jnp.concatenate([jnp.zeros((1, *shape)), inner, jnp.ones((1, *shape))])

@@ -161,7 +161,7 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
         if np.any(~np.isfinite(w)) or np.any(w <= 0):
             raise LayerstackError("wavelength_nm must be finite and > 0")
     n = tuple(
-        jnp.asarray(m(wl))
+        m(wl)  # numpy when concrete: lets static work (critical angles) happen at trace time
         for m in (stack.ambient, *(layer.index for layer in stack.layers), stack.exit.index)
     )
     for i, (ni, layer) in enumerate(zip(n[1:-1], stack.layers)):

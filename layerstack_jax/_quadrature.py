@@ -11,10 +11,14 @@ and likewise the diffuse transmittance (eqs. 49, 63). :math:`R(\mu)` has square-
 points at every critical angle :math:`\mu_c = (n_j/n_f)^2 < 1` of a thick medium *j* and at grazing
 incidence :math:`\mu = 1` (PHYSICS.md, trap 4). Thin coherent films add none: the response of a
 finite film is even in its own :math:`q_j`. We therefore split [0, 1] at the critical angles
-and, on each segment :math:`[a, b]`, substitute :math:`\mu = a + (b-a)\,(1-\cos\pi v)/2`,
-which turns square-root end-point singularities on both sides into smooth integrands in v,
-then apply Gauss–Legendre in v. The error decreases exponentially with the node count
-instead of as :math:`N^{-3}`. The number of segments is static (one per thick medium); the
+and, on each segment :math:`[a, b]`, substitute :math:`\mu = a + (b-a)\,g(g(v))` with
+:math:`g(v) = (1-\cos\pi v)/2`, then apply Gauss–Legendre in v. One application of g already
+turns square-root end-point singularities on both sides into smooth integrands (16 nodes give
+3e-13 on the internal diffuse reflectance of glass); the second one clusters nodes harder at the
+ends, where a weakly absorbing thick layer seen near its own grazing direction contributes the
+sharp Beer factor :math:`\exp(-\alpha h/\cos\theta)` (measured: αh = 0.01 next to grazing, 24
+nodes: 4e-8 with the double map against 6e-7 with the single one). The error decreases much
+faster than the :math:`N^{-3}` of plain Gauss–Legendre. The number of segments is static (one per thick medium); the
 split points are traced, so the indices themselves can be fitted.
 """
 
@@ -29,8 +33,8 @@ from ._validate import is_concrete
 
 __all__ = ["DEFAULT_NODES", "unit_rule", "hemispherical_rule", "plain_gauss_legendre_rule"]
 
-#: Default Gauss–Legendre nodes per segment: ≤ 1e-10 absolute error on the diffuse reflectance
-#: of single interfaces and multilayer stacks (see tests/test_quadrature.py, benchmarks).
+#: Default Gauss–Legendre nodes per segment (accuracy measured in tests/test_quadrature.py and
+#: the benchmarks' accuracy-vs-cost table).
 DEFAULT_NODES = 24
 
 
@@ -41,10 +45,11 @@ def unit_rule(nodes: int) -> tuple[np.ndarray, np.ndarray]:
     Returns ``(x, w)`` with :math:`\\sum_i w_i f(x_i) \\approx \\int_0^1 f(x) dx`.
     """
     v, wv = np.polynomial.legendre.leggauss(nodes)
-    v = 0.5 * (v + 1.0)
-    wv = 0.5 * wv
-    x = 0.5 * (1.0 - np.cos(np.pi * v))
-    w = wv * 0.5 * np.pi * np.sin(np.pi * v)
+    x = 0.5 * (v + 1.0)
+    w = 0.5 * wv
+    for _ in range(2):  # x <- g(x), w <- w g'(x)
+        w = w * 0.5 * np.pi * np.sin(np.pi * x)
+        x = 0.5 * (1.0 - np.cos(np.pi * x))
     return x, w
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ._quadrature import DEFAULT_NODES, hemispherical_rule
 from ._response import natural, stack_intensities, thick_media
-from ._stack import LambertianBackground, ResolvedStack, Stack, Substrate, resolve
+from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
 __all__ = [
@@ -166,6 +166,14 @@ class Specular(Geometry):
             raise LayerstackError(f"Specular.quantity must be 'R', 'T' or 'A', got {self.quantity!r}")
 
 
+def _check_angles(geometry: Geometry, text: str) -> Geometry:
+    for name in ("incidence_deg", "viewing_deg", "angle_deg"):
+        value = getattr(geometry, name, None)
+        if value is not None and not 0.0 <= float(value) < 90.0:
+            raise LayerstackError(f"geometry {text!r}: {name} must lie in [0, 90) degrees, got {value}")
+    return geometry
+
+
 def parse_geometry(text: str) -> Geometry:
     """Parse ``sphere:8:sce``, ``sphere:8:sci``, ``45/0``, ``0/45``, ``brdf:45:0``, ``specular:30``
     (optionally ``specular:30:T`` / ``:A``)."""
@@ -177,17 +185,19 @@ def parse_geometry(text: str) -> Geometry:
             mode = parts[2] if len(parts) > 2 else "sce"
             if mode not in ("sce", "sci"):
                 raise ValueError
-            return Sphere(angle, "excluded" if mode == "sce" else "included")
+            return _check_angles(Sphere(angle, "excluded" if mode == "sce" else "included"), text)
         if t.startswith("brdf"):
             _, i, v = t.split(":")
-            return BRDF(float(i), float(v))
+            return _check_angles(BRDF(float(i), float(v)), text)
         if t.startswith("specular"):
             parts = t.split(":")
             q = parts[2].upper() if len(parts) > 2 else "R"
-            return Specular(float(parts[1]), q)
+            return _check_angles(Specular(float(parts[1]), q), text)
         if "/" in t:
             i, v = t.split("/")
-            return Directional(float(i), float(v))
+            return _check_angles(Directional(float(i), float(v)), text)
+    except LayerstackError:
+        raise
     except (ValueError, IndexError):
         pass
     raise LayerstackError(
@@ -236,7 +246,8 @@ def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int =
     if isinstance(geometry, (Directional, BRDF)):
         if not background:
             raise LayerstackError(
-                "a specular substrate has no diffuse reflectance factor; use Specular(angle) or a LambertianBackground"
+                "a specular substrate has no diffuse reflectance factor: measure it with a specular geometry "
+                "(Specular(angle), CLI 'specular:ANGLE') or put the stack over a LambertianBackground"
             )
         d = _diffuse_resolved(rs, "back", nodes)
         rho = rs.rho_g

@@ -130,6 +130,13 @@ class Tabulated(Material):
                     f"{table[0]:g}–{table[-1]:g} nm"
                 )
         x = jnp.asarray(wavelength_nm)
+        if not is_concrete(wavelength_nm):
+            # traced grid: the check runs inside the compiled function
+            x = eqx.error_if(
+                x,
+                (x < table[0] - 1e-9) | (x > table[-1] + 1e-9),
+                f"{self.name}: wavelengths outside the data range {table[0]:g}–{table[-1]:g} nm",
+            )
         n = jnp.interp(x, table, jnp.asarray(self.n))
         k = 0.0 if self.k is None else jnp.interp(x, table, jnp.asarray(self.k))
         return _complex(n, k)

@@ -12,7 +12,6 @@ interface with its own R_front ≠ R_back when its films absorb.
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 
 from ._coherent import PacketIntensities, packet_intensities
 from ._fresnel import normal_wavevector

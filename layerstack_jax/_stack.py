@@ -10,14 +10,14 @@ differentiated.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Optional, Sequence, Union
+from typing import NamedTuple, Optional, Union
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ._materials import Index, Material, Tabulated, as_material
-from ._validate import LayerstackError, check_finite, check_nonnegative, check_unit_interval, is_concrete
+from ._validate import LayerstackError, check_nonnegative, check_unit_interval, is_concrete
 
 __all__ = [
     "Layer",
@@ -59,7 +59,8 @@ class Layer(eqx.Module):
                 raise LayerstackError(
                     f"{label}: alpha is for incoherent layers; give a coherent film an extinction coefficient k"
                 )
-            check_nonnegative(f"{label}: alpha (1/nm)", self.alpha)
+            if not callable(self.alpha):
+                check_nonnegative(f"{label}: alpha (1/nm)", self.alpha)
 
 
 class Substrate(eqx.Module):

@@ -1,0 +1,262 @@
+"""Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]``.
+
+Runnable as ``layerstack`` (console script) or ``python -m layerstack_jax.cli``. The stack file
+format is described in :mod:`layerstack_jax.io`.
+
+Unlike the library, the command line enables float64 (``jax_enable_x64``) unless ``--float32``
+is given, and restores the previous setting when it returns (so ``main`` can be called
+in-process). Input problems (bad stack file, CSV table, geometry, wavelength grid, unwritable
+output) print ``layerstack: error: <message>`` to stderr and give exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ._geometry import BRDF, Directional, Specular, Sphere, parse_geometry, reflectance
+from ._materials import Index, Tabulated
+from ._quadrature import DEFAULT_NODES
+from ._stack import LambertianBackground, Stack, resolve
+from ._validate import LayerstackError
+from .io import load_stack, parse_wavelengths, save_spectra_csv
+
+__all__ = ["main"]
+
+PROG = "layerstack"
+
+
+# ------------------------------------------------------------------- shared helpers
+@contextlib.contextmanager
+def _precision(float32: bool):
+    """float64 unless ``float32``; restores the previous JAX setting afterwards."""
+    import jax
+
+    previous = bool(jax.config.read("jax_enable_x64"))
+    jax.config.update("jax_enable_x64", not float32)
+    try:
+        yield
+    finally:
+        jax.config.update("jax_enable_x64", previous)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def _parse_geometries(texts: list[str]) -> list[tuple[str, object]]:
+    """``[(column name, Geometry)]`` for the requested geometries, validated before any work.
+
+    ``specular:θ`` expands into three columns ``R_θ, T_θ, A_θ``; ``specular:θ:Q`` gives ``Q_θ``.
+    Other geometries give one column named after the geometry string.
+    """
+    columns: list[tuple[str, object]] = []
+    for text in texts:
+        text = text.strip()
+        g = parse_geometry(text)  # raises LayerstackError with the list of accepted forms
+        angles = (g.angle_deg,) if isinstance(g, Specular) else (g.incidence_deg,) if isinstance(g, Sphere) else (
+            g.incidence_deg,
+            g.viewing_deg,
+        )
+        for a in angles:
+            if not 0.0 <= float(a) < 90.0:
+                raise LayerstackError(f"geometry {text!r}: angles must lie in [0, 90) degrees, got {float(a):g}")
+        if isinstance(g, Specular):
+            parts = text.split(":")
+            angle = parts[1].strip()
+            quantities = ("R", "T", "A") if len(parts) == 2 else (g.quantity,)
+            columns += [(f"{q}_{angle}", Specular(g.angle_deg, q)) for q in quantities]
+        else:
+            columns.append((text, g))
+    names = [name for name, _ in columns]
+    for name in names:
+        if names.count(name) > 1:
+            raise LayerstackError(f"geometry {name!r} requested twice")
+    return columns
+
+
+def _describe(stack: Stack) -> str:
+    """One-line summary of a stack for plot titles: ``air | SiO2 120 nm | substrate``."""
+
+    def index(m):
+        if isinstance(m, Index) and np.ndim(m.n) == 0:
+            return f"n={float(np.asarray(m.n)):g}"
+        if isinstance(m, Tabulated):
+            return m.name.split(" (")[0]
+        return type(m).__name__
+
+    parts = [f"ambient {index(stack.ambient)}"]
+    for layer in stack.layers:
+        d = float(np.asarray(layer.thickness))
+        size = f"{d / 1000:g} µm" if d >= 1000 else f"{d:g} nm"
+        parts.append(f"{layer.name or 'layer'} {size}{'' if layer.coherent else ' (incoherent)'}")
+    if isinstance(stack.exit, LambertianBackground):
+        parts.append(f"Lambertian background {index(stack.exit.index)}")
+    else:
+        parts.append(f"substrate {index(stack.exit.index)}")
+    return " | ".join(parts)
+
+
+def _quantity_label(geometry) -> str:
+    if isinstance(geometry, BRDF):
+        return "BRDF (1/sr)"
+    if isinstance(geometry, Directional):
+        return "reflectance factor"
+    if isinstance(geometry, Sphere):
+        return "reflectance"
+    return {"R": "reflectance", "T": "transmittance", "A": "absorptance"}[geometry.quantity]
+
+
+def _plot(path: Path, wavelength, columns: dict, geometries: dict, title: str, subtitle: str) -> None:
+    """Spectra as a PNG (matplotlib object API with the Agg canvas: no global backend change)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 4.8), dpi=120, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    brdf = [name for name in columns if isinstance(geometries[name], BRDF)]
+    others = [name for name in columns if name not in brdf]
+    ax_brdf = ax if not others else (ax.twinx() if brdf else None)
+    styles = {"R": "-", "T": "--", "A": ":"}
+    lines = []
+    for i, name in enumerate(others + brdf):
+        g = geometries[name]
+        target = ax_brdf if name in brdf else ax
+        style = styles[g.quantity] if isinstance(g, Specular) else "-"
+        label = f"{name} ({_quantity_label(g)})" if name in brdf and others else name
+        (line,) = target.plot(wavelength, columns[name], style, color=f"C{i}", lw=1.8, label=label)
+        lines.append(line)
+    kinds = list(dict.fromkeys(_quantity_label(geometries[n]) for n in others))
+    ax.set_xlabel("wavelength (nm)")
+    ax.set_ylabel(" / ".join(kinds) if others else "BRDF (1/sr)")
+    if brdf and others:
+        ax_brdf.set_ylabel("BRDF (1/sr)")
+        ax_brdf.set_ylim(bottom=0)
+    if len(wavelength) > 1:
+        ax.set_xlim(float(wavelength[0]), float(wavelength[-1]))
+    lo = min(float(np.nanmin(columns[n])) for n in (others or brdf))
+    ax.set_ylim(bottom=min(0.0, lo))
+    ax.grid(True, alpha=0.3)
+    ax.legend(handles=lines, loc="best", frameon=False)
+    ax.set_title(f"{title}\n{subtitle}", fontsize=10)
+    fig.savefig(path)
+
+
+# ---------------------------------------------------------------------- predict
+def _add_predict_parser(sub) -> None:
+    p = sub.add_parser(
+        "predict",
+        help="compute spectra of a stack for measurement geometries",
+        description="Compute what instruments of the given geometries read for the stack, write a CSV "
+        "(wavelength_nm, then one column per geometry) and optionally a PNG plot.",
+        epilog="geometries: sphere:ANGLE:sce | sphere:ANGLE:sci (integrating sphere, specular excluded / "
+        "included), I/V such as 45/0 or 0/45 (reflectance factor), brdf:I:V (1/sr), specular:ANGLE "
+        "(columns R_ANGLE, T_ANGLE, A_ANGLE; or specular:ANGLE:R|T|A for one). Angles in degrees.",
+    )
+    p.add_argument("stack", metavar="STACK.toml", help="stack file (format: see layerstack_jax.io)")
+    p.add_argument("--wavelengths", "-w", default="380:780:5", metavar="GRID",
+                   help="start:stop:step in nm (stop included), one value, or a comma list (default 380:780:5)")
+    p.add_argument("--geometry", "-g", action="append", required=True, metavar="GEOM",
+                   help="measurement geometry; repeat for several (see below)")
+    p.add_argument("--output", "-o", required=True, metavar="OUT.csv", help="CSV file to write")
+    p.add_argument("--plot", metavar="OUT.png", help="also write a plot of the spectra (PNG)")
+    p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
+    p.add_argument("--nodes", type=_positive_int, default=DEFAULT_NODES, metavar="N",
+                   help=f"Gauss-Legendre nodes per angular segment for diffuse integrals (default {DEFAULT_NODES})")
+    p.set_defaults(func=_cmd_predict)
+
+
+def _cmd_predict(args) -> int:
+    start = time.perf_counter()
+    wavelength = parse_wavelengths(args.wavelengths)
+    requested = _parse_geometries(args.geometry)
+    with _precision(args.float32):
+        stack = load_stack(args.stack)
+        try:
+            resolve(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
+        except LayerstackError as e:
+            raise LayerstackError(f"{args.stack}: {e}") from None
+        columns, geometries = {}, {}
+        for name, geometry in requested:
+            try:
+                # Eager (not jitted) on purpose: concrete inputs keep the library's checks,
+                # e.g. a wavelength outside a table's range is an error instead of a clamp.
+                values = reflectance(stack, wavelength, geometry, nodes=args.nodes)
+            except LayerstackError as e:
+                raise LayerstackError(f"geometry {name!r}: {e}") from None
+            columns[name] = np.asarray(values, dtype=float)
+            geometries[name] = geometry
+    bad = [name for name, v in columns.items() if not np.all(np.isfinite(v))]
+    if bad:
+        print(f"{PROG}: warning: non-finite values in column(s) {', '.join(bad)}", file=sys.stderr)
+    out = save_spectra_csv(args.output, wavelength, columns)
+    ranges = ", ".join(f"{name} {np.nanmin(v):.4g}..{np.nanmax(v):.4g}" for name, v in columns.items())
+    grid = f"{wavelength[0]:g}-{wavelength[-1]:g} nm" if wavelength.size > 1 else f"{wavelength[0]:g} nm"
+    elapsed = time.perf_counter() - start
+    print(f"{PROG}: wrote {out} ({wavelength.size} wavelengths {grid}; {ranges}) in {elapsed:.1f} s")
+    if args.plot:
+        plot = Path(args.plot)
+        plot.parent.mkdir(parents=True, exist_ok=True)
+        _plot(plot, wavelength, columns, geometries, title=Path(args.stack).name, subtitle=_describe(stack))
+        print(f"{PROG}: wrote {plot} (plot of {len(columns)} spectr{'um' if len(columns) == 1 else 'a'})")
+    return 0
+
+
+# ============================================================== more subcommands
+# `fit` (adjust stack parameters to measured spectra) and `design` (optimise a stack towards a
+# target) go here: write `_add_fit_parser(sub)` / `_cmd_fit(args)` (and the same for design)
+# like the predict pair above, reuse `_precision`, `_parse_geometries`, `load_stack`,
+# `parse_wavelengths` and `save_spectra_csv`, and add the parser builders to _SUBCOMMANDS.
+# ================================================================================
+
+_SUBCOMMANDS = (_add_predict_parser,)  # later: _add_fit_parser, _add_design_parser
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
+    parser = argparse.ArgumentParser(prog=PROG, description="Light in layered coatings (layerstack_jax).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def _os_error_message(e: OSError) -> str:
+    if e.filename is not None and e.strerror:
+        return f"{e.filename}: {e.strerror}"
+    return str(e)
+
+
+def main(argv=None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); returns the exit status
+    (0 success, 2 usage or input error) instead of exiting, so it can be called in-process."""
+    parser = _build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse usage errors (status 2), --help / --version (0)
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    try:
+        return args.func(args)
+    except LayerstackError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+    except OSError as e:
+        print(f"{PROG}: error: {_os_error_message(e)}", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,604 @@
+r"""Files: stack descriptions (TOML), spectra (CSV) and wavelength grids.
+
+Stack files
+-----------
+A stack is described in a TOML file, read with :func:`load_stack` (or, from a dict already in
+memory, :func:`stack_from_dict`). Layers are listed from the side the light comes from::
+
+    description = "optional free text"
+
+    [ambient]                 # optional; default: air, n = 1.0
+    n = 1.0                   # real (light comes from here): a number or a dispersion (below)
+
+    [[layers]]                # zero or more, top to bottom
+    name = "varnish"          # optional; used in messages (default "layer 1", "layer 2" ...)
+    n = 1.52                  # refractive index: number or dispersion (below)
+    k = 0.0                   # optional extinction coefficient >= 0 (number)
+    thickness_nm = 20000      # required, >= 0
+    coherent = false          # required: true for a thin film (interference), false for a
+                              # thick layer (intensities add; Beer's law)
+    alpha_per_nm = 2e-5       # optional, incoherent layers only: absorption coefficient in
+                              # 1/nm, a number, { table = "alpha.csv" } (columns
+                              # wavelength_nm, alpha_per_nm) or inline
+                              # { wavelength_nm = [...], values = [...] }
+
+    [substrate]               # either a specular semi-infinite substrate ...
+    n = 1.52                  # number or dispersion (below)
+    k = 0.0                   # optional
+
+    [background]              # ... or a Lambertian (diffusing) background: exactly one of the two
+    n = 1.5                   # real index of the background's binder
+    rho_g = 0.8               # intrinsic reflectance in [0, 1]: a number, { table = "rho.csv" }
+                              # (columns wavelength_nm, rho_g) or inline
+                              # { wavelength_nm = [...], values = [...] }
+
+Dispersion: wherever ``n`` is accepted it may also be an inline table with exactly one of
+
+* ``n = { cauchy = [A, B, C] }`` — :math:`n = A + B/\lambda^2 + C/\lambda^4`, λ in µm
+  (1 to 3 coefficients; ``k`` from the ``k`` key, constant);
+* ``n = { sellmeier = { B = [...], C = [...] } }`` — :math:`n^2 = 1 + \sum B_i\lambda^2/(\lambda^2 - C_i)`,
+  λ in µm, :math:`C_i` in µm² (``k`` from the ``k`` key, constant);
+* ``n = { table = "file.csv" }`` — CSV with columns ``wavelength_nm, n`` and optionally ``k``
+  (if the file has no ``k`` column, the ``k`` key gives a constant k);
+* ``n = { wavelength_nm = [...], n = [...], k = [...] }`` — the same table inline (k optional);
+* ``n = { material = "Au" }`` — a named material; reserved for the material database, not yet
+  available (raises an error).
+
+Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
+an error. Relative file names are taken relative to the directory of the TOML file.
+
+CSV files need a header row naming the columns (any order, case-insensitive); lines starting
+with ``#`` before the header and blank lines are ignored; wavelengths must increase strictly.
+
+Every problem in a file (missing or unknown key — unknown keys are rejected to catch typos —,
+both or neither of ``[substrate]`` and ``[background]``, a negative number, a malformed CSV …)
+raises :class:`~layerstack_jax.LayerstackError` with a message naming the file, the table and
+key, and what is wrong.
+
+Spectra and wavelengths
+-----------------------
+:func:`save_spectra_csv` writes ``wavelength_nm`` and named columns; :func:`parse_wavelengths`
+turns ``"380:780:5"`` (start:stop:step in nm, stop included when on the grid), ``"550"`` or
+``"450,550,650"`` into an array.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from pathlib import Path
+from typing import Iterable, Mapping, Optional
+
+import numpy as np
+
+from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
+from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
+from ._validate import LayerstackError, is_concrete
+
+__all__ = [
+    "load_stack",
+    "stack_from_dict",
+    "stack_to_dict",
+    "read_csv_columns",
+    "save_spectra_csv",
+    "parse_wavelengths",
+]
+
+_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background")
+_LAYER_KEYS = ("name", "n", "k", "thickness_nm", "coherent", "alpha_per_nm")
+_SUBSTRATE_KEYS = ("n", "k")
+_BACKGROUND_KEYS = ("n", "rho_g")
+_AMBIENT_KEYS = ("n",)
+_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material")
+
+
+# ----------------------------------------------------------------------------- helpers
+class _Where:
+    """Where we are in a file, for error messages: ``<file>: <table>: key '<key>': <what>``."""
+
+    def __init__(self, source: str, table: str):
+        self.source = source
+        self.table = table
+
+    def error(self, what: str, key: Optional[str] = None) -> LayerstackError:
+        place = f"{self.table}: key {key!r}" if key else self.table
+        return LayerstackError(f"{self.source}: {place}: {what}")
+
+
+def _reject_unknown(where: _Where, table: Mapping, allowed: Iterable[str]) -> None:
+    allowed = tuple(allowed)
+    for key in table:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise where.error(f"unknown key {key!r}{hint}; allowed keys: {', '.join(allowed)}")
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _number(where: _Where, key: str, x, *, minimum: Optional[float] = None, maximum: Optional[float] = None,
+            positive: bool = False, what: str = "") -> float:
+    label = f" ({what})" if what else ""
+    if not _is_number(x):
+        raise where.error(f"must be a number{label}, got {x!r}", key)
+    v = float(x)
+    if not math.isfinite(v):
+        raise where.error(f"must be finite{label}, got {v!r}", key)
+    if positive and v <= 0:
+        raise where.error(f"must be > 0{label}, got {v!r}", key)
+    if minimum is not None and v < minimum:
+        raise where.error(f"must be >= {minimum:g}{label}, got {v!r}", key)
+    if maximum is not None and v > maximum:
+        raise where.error(f"must be <= {maximum:g}{label}, got {v!r}", key)
+    return v
+
+
+def _number_list(where: _Where, key: str, x, what: str) -> np.ndarray:
+    if not isinstance(x, list) or not x or not all(_is_number(v) for v in x):
+        raise where.error(f"{what} must be a non-empty list of numbers, got {x!r}", key)
+    a = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise where.error(f"{what} must be finite numbers, got {x!r}", key)
+    return a
+
+
+def _check_grid(where: _Where, key: str, wl: np.ndarray, what: str) -> None:
+    if wl.size < 2:
+        raise where.error(f"{what}: needs at least 2 wavelengths, got {wl.size}", key)
+    if np.any(wl <= 0):
+        raise where.error(f"{what}: wavelengths must be > 0 nm", key)
+    if np.any(np.diff(wl) <= 0):
+        i = int(np.argmax(np.diff(wl) <= 0))
+        raise where.error(
+            f"{what}: wavelengths must increase strictly (wavelength_nm {wl[i]:g} is followed by {wl[i + 1]:g})", key
+        )
+
+
+def _check_range(where: _Where, key: str, values: np.ndarray, what: str, lo=None, hi=None) -> None:
+    if lo is not None and np.any(values < lo):
+        raise where.error(f"{what}: values must be >= {lo:g}, got min {values.min():g}", key)
+    if hi is not None and np.any(values > hi):
+        raise where.error(f"{what}: values must be <= {hi:g}, got max {values.max():g}", key)
+
+
+# --------------------------------------------------------------------------------- CSV
+def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()) -> dict[str, np.ndarray]:
+    """Read a numeric CSV file with a header row into ``{column: float array}``.
+
+    Columns are matched case-insensitively and may come in any order; ``required`` ones must be
+    present, ``optional`` ones may be, any other column is an error. Blank lines and lines
+    starting with ``#`` are skipped. Raises :class:`LayerstackError` naming the file (and line)
+    for a missing file, a missing header, a short or non-numeric row, or non-finite values.
+    Does not check the wavelength order (callers do).
+    """
+    path = Path(path)
+    required = [c.lower() for c in required]
+    optional = [c.lower() for c in optional]
+    expected = ", ".join(required + [f"[{c}]" for c in optional])
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read: {e}") from None
+    lines = [(i + 1, line.strip()) for i, line in enumerate(text.splitlines())]
+    lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
+    if not lines:
+        raise LayerstackError(f"{path}: empty file (expected a header row {expected} and data rows)")
+    header_line, header = lines[0]
+    names = [h.strip().lower() for h in header.split(",")]
+
+    def _is_float(s):
+        try:
+            float(s)
+            return True
+        except ValueError:
+            return False
+
+    if all(_is_float(h) for h in names):
+        raise LayerstackError(f"{path}: line {header_line}: header row required (columns {expected}), got numbers")
+    for name in names:
+        if name not in required and name not in optional:
+            raise LayerstackError(f"{path}: line {header_line}: unknown column {name!r}; expected columns {expected}")
+        if names.count(name) > 1:
+            raise LayerstackError(f"{path}: line {header_line}: column {name!r} appears twice")
+    for name in required:
+        if name not in names:
+            raise LayerstackError(f"{path}: line {header_line}: missing column {name!r}; expected columns {expected}")
+    rows = []
+    for line_no, line in lines[1:]:
+        fields = [f.strip() for f in line.split(",")]
+        if len(fields) != len(names):
+            raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns ({', '.join(names)})")
+        try:
+            row = [float(f) for f in fields]
+        except ValueError:
+            raise LayerstackError(f"{path}: line {line_no}: not a number in {line!r}") from None
+        if not all(math.isfinite(v) for v in row):
+            raise LayerstackError(f"{path}: line {line_no}: NaN or infinite value in {line!r}")
+        rows.append(row)
+    if not rows:
+        raise LayerstackError(f"{path}: no data rows after the header")
+    data = np.asarray(rows, dtype=float)
+    return {name: data[:, j] for j, name in enumerate(names)}
+
+
+def _read_table(where: _Where, key: str, base_dir: Path, filename, required, optional=()) -> tuple[Path, dict]:
+    if not isinstance(filename, str) or not filename:
+        raise where.error(f"table must be a file name (string), got {filename!r}", key)
+    path = Path(filename)
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise where.error(f"table file {filename!r} not found (looked for {path})", key)
+    try:
+        cols = read_csv_columns(path, required, optional)
+    except LayerstackError as e:
+        raise where.error(f"bad table: {e}", key) from None
+    return path, cols
+
+
+# --------------------------------------------------------------------------- materials
+def _material(where: _Where, table: Mapping, base_dir: Path, *, allow_k: bool, label: str) -> Material:
+    """The material of a table with an ``n`` key (and optionally ``k``)."""
+    if "n" not in table:
+        raise where.error("missing (refractive index: a number or a dispersion table)", "n")
+    spec = table["n"]
+    k_given = "k" in table
+    if k_given and not allow_k:
+        raise where.error("not allowed here: this medium must be transparent (real index, no k)", "k")
+    k = _number(where, "k", table["k"], minimum=0.0, what="extinction coefficient") if k_given else 0.0
+
+    if _is_number(spec):
+        return Index(_number(where, "n", spec, positive=True, what="refractive index"), k)
+    if not isinstance(spec, dict):
+        raise where.error(f"must be a number or an inline table such as {{ cauchy = [A, B] }}, got {spec!r}", "n")
+
+    inline_keys = ("wavelength_nm", "n", "k")
+    if "wavelength_nm" in spec:
+        _reject_unknown(_Where(where.source, f"{where.table}: key 'n'"), spec, inline_keys)
+        wl = _number_list(where, "n", spec["wavelength_nm"], "wavelength_nm")
+        if "n" not in spec:
+            raise where.error("inline table needs 'n' (and optionally 'k') lists next to 'wavelength_nm'", "n")
+        nn = _number_list(where, "n", spec["n"], "n")
+        kk = _number_list(where, "n", spec["k"], "k") if "k" in spec else None
+        return _tabulated(where, wl, nn, kk, k_given, k, allow_k, f"{label} (inline table)")
+
+    chosen = [name for name in spec if name in _DISPERSION_KEYS]
+    _reject_unknown(_Where(where.source, f"{where.table}: key 'n'"), spec, _DISPERSION_KEYS)
+    if len(chosen) != 1:
+        raise where.error(
+            "give exactly one of cauchy = [...], sellmeier = {B=[...], C=[...]}, table = \"file.csv\", "
+            f"material = \"name\" or an inline wavelength_nm/n/k table; got {spec!r}",
+            "n",
+        )
+    kind = chosen[0]
+    value = spec[kind]
+    if kind == "material":
+        raise where.error(
+            f"unknown material {value!r}: the material database is not available yet; give n (and k) as numbers, "
+            "a cauchy/sellmeier formula or a table",
+            "n",
+        )
+    if kind == "cauchy":
+        coef = _number_list(where, "n", value, "cauchy coefficients [A, B, C]")
+        if coef.size > 3:
+            raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {coef.size}", "n")
+        if coef[0] <= 0:
+            raise where.error(f"cauchy A must be > 0, got {coef[0]:g}", "n")
+        A, B, C = (list(coef) + [0.0, 0.0])[:3]
+        return Cauchy(A, B, C, k)
+    if kind == "sellmeier":
+        if not isinstance(value, dict):
+            raise where.error(f"sellmeier must be an inline table {{ B = [...], C = [...] }}, got {value!r}", "n")
+        _reject_unknown(_Where(where.source, f"{where.table}: key 'n': sellmeier"), value, ("B", "C"))
+        if "B" not in value or "C" not in value:
+            raise where.error("sellmeier needs both B = [...] and C = [...] (C in µm²)", "n")
+        B = _number_list(where, "n", value["B"], "sellmeier B")
+        C = _number_list(where, "n", value["C"], "sellmeier C")
+        if B.shape != C.shape:
+            raise where.error(f"sellmeier B and C must have the same length, got {B.size} and {C.size}", "n")
+        return Sellmeier(B, C, k)
+    # table
+    path, cols = _read_table(where, "n", base_dir, value, ("wavelength_nm", "n"), ("k",))
+    return _tabulated(where, cols["wavelength_nm"], cols["n"], cols.get("k"), k_given, k, allow_k,
+                      f"{path.name} ({label})", file=str(value))
+
+
+def _tabulated(where, wl, n, k_col, k_given, k, allow_k, name, file=None) -> Tabulated:
+    what = f"table {file!r}" if file else "inline table"
+    _check_grid(where, "n", wl, what)
+    for col, v in (("n", n), ("k", k_col)):
+        if v is not None and v.shape != wl.shape:
+            raise where.error(f"{what}: column {col} has {v.size} values for {wl.size} wavelengths", "n")
+    _check_range(where, "n", n, f"{what}: column n", lo=np.finfo(float).tiny)
+    if k_col is not None:
+        if k_given:
+            raise where.error(f"k is given both as a key and as a column of the {what}; keep one", "k")
+        _check_range(where, "n", k_col, f"{what}: column k", lo=0.0)
+        if not allow_k and np.any(k_col != 0):
+            raise where.error(f"{what}: this medium must be transparent (k = 0)", "n")
+    elif k_given:
+        k_col = np.full_like(wl, k)
+    return Tabulated(wl, n, k_col, name=name)
+
+
+def _spectrum(where: _Where, key: str, spec, base_dir: Path, column: str, label: str, *, lo, hi):
+    """A number or a tabulated spectrum (file or inline) for ``alpha_per_nm`` or ``rho_g``."""
+    if _is_number(spec):
+        return _number(where, key, spec, minimum=lo, maximum=hi)
+    if not isinstance(spec, dict):
+        raise where.error(
+            f"must be a number, {{ table = \"file.csv\" }} or {{ wavelength_nm = [...], values = [...] }}, got {spec!r}",
+            key,
+        )
+    if "table" in spec:
+        _reject_unknown(_Where(where.source, f"{where.table}: key {key!r}"), spec, ("table",))
+        path, cols = _read_table(where, key, base_dir, spec["table"], ("wavelength_nm", column))
+        wl, values, what, name = cols["wavelength_nm"], cols[column], f"table {spec['table']!r}", f"{path.name} ({label})"
+    else:
+        _reject_unknown(_Where(where.source, f"{where.table}: key {key!r}"), spec, ("wavelength_nm", "values", "table"))
+        if "wavelength_nm" not in spec or "values" not in spec:
+            raise where.error("give { table = \"file.csv\" } or both wavelength_nm = [...] and values = [...]", key)
+        wl = _number_list(where, key, spec["wavelength_nm"], "wavelength_nm")
+        values = _number_list(where, key, spec["values"], "values")
+        what, name = "inline table", f"{label} (inline table)"
+        if values.shape != wl.shape:
+            raise where.error(f"{what}: {values.size} values for {wl.size} wavelengths", key)
+    _check_grid(where, key, wl, what)
+    _check_range(where, key, values, what, lo=lo, hi=hi)
+    return TabulatedSpectrum(wl, values, name=name)
+
+
+def _layer(where: _Where, table: Mapping, base_dir: Path, name: str) -> Layer:
+    _reject_unknown(where, table, _LAYER_KEYS)
+    if "thickness_nm" not in table:
+        raise where.error("missing (layer thickness in nm)", "thickness_nm")
+    thickness = _number(where, "thickness_nm", table["thickness_nm"], minimum=0.0, what="nm")
+    if "coherent" not in table:
+        raise where.error(
+            "missing: say coherent = true for a thin film (interference) or false for a thick layer "
+            "(thicker than the coherence length, ~ a few µm)",
+            "coherent",
+        )
+    coherent = table["coherent"]
+    if not isinstance(coherent, bool):
+        raise where.error(f"must be true or false, got {coherent!r}", "coherent")
+    index = _material(where, table, base_dir, allow_k=True, label=f"layer {name!r} n")
+    alpha = None
+    if "alpha_per_nm" in table:
+        if coherent:
+            raise where.error(
+                "is only for incoherent layers (coherent = false); give a coherent film an extinction coefficient k",
+                "alpha_per_nm",
+            )
+        alpha = _spectrum(where, "alpha_per_nm", table["alpha_per_nm"], base_dir, "alpha_per_nm",
+                          f"layer {name!r} alpha", lo=0.0, hi=None)
+    return Layer(index, thickness, coherent=coherent, alpha=alpha, name=name)
+
+
+# ------------------------------------------------------------------------------ stacks
+def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>") -> Stack:
+    """Build a :class:`Stack` from the parsed contents of a stack file (schema: module docstring).
+
+    Args:
+        d: the dict (as from ``tomllib``).
+        base_dir: directory against which relative table file names are resolved.
+        source: name used in error messages (the file name when called by :func:`load_stack`).
+    """
+    base_dir = Path(base_dir)
+    top = _Where(source, "top level")
+    if not isinstance(d, Mapping):
+        raise top.error(f"expected a table of keys, got {type(d).__name__}")
+    _reject_unknown(top, d, _TOP_KEYS)
+    if "description" in d and not isinstance(d["description"], str):
+        raise top.error("must be a string", "description")
+
+    def _table(key):
+        t = d[key]
+        if not isinstance(t, Mapping):
+            raise top.error(f"must be a table [{key}], got {t!r}", key)
+        return t
+
+    try:
+        if "ambient" in d:
+            where = _Where(source, "[ambient]")
+            amb = _table("ambient")
+            _reject_unknown(where, amb, _AMBIENT_KEYS + ("k",))
+            ambient = _material(where, amb, base_dir, allow_k=False, label="ambient n")
+        else:
+            ambient = Index(1.0)
+
+        raw_layers = d.get("layers", [])
+        if not isinstance(raw_layers, list) or not all(isinstance(t, Mapping) for t in raw_layers):
+            raise top.error("must be an array of tables, written [[layers]]", "layers")
+        layers = []
+        for i, t in enumerate(raw_layers):
+            name = t.get("name", f"layer {i + 1}")
+            label = f"[[layers]] no. {i + 1}"
+            if not isinstance(name, str) or not name:
+                raise _Where(source, label).error(f"must be a non-empty string, got {name!r}", "name")
+            layers.append(_layer(_Where(source, f"{label} ({name!r})"), t, base_dir, name))
+
+        has_sub, has_bg = "substrate" in d, "background" in d
+        if has_sub and has_bg:
+            raise top.error("give either [substrate] (specular) or [background] (Lambertian), not both")
+        if not (has_sub or has_bg):
+            raise top.error("missing the exit medium: add a [substrate] (specular) or a [background] (Lambertian) table")
+        if has_sub:
+            where = _Where(source, "[substrate]")
+            sub = _table("substrate")
+            _reject_unknown(where, sub, _SUBSTRATE_KEYS)
+            exit_ = Substrate(_material(where, sub, base_dir, allow_k=True, label="substrate n"))
+        else:
+            where = _Where(source, "[background]")
+            bg = _table("background")
+            _reject_unknown(where, bg, _BACKGROUND_KEYS + ("k",))
+            index = _material(where, bg, base_dir, allow_k=False, label="background n")
+            if "rho_g" not in bg:
+                raise where.error("missing (intrinsic reflectance of the background, in [0, 1])", "rho_g")
+            rho = _spectrum(where, "rho_g", bg["rho_g"], base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
+            exit_ = LambertianBackground(index, rho)
+        return Stack(ambient=ambient, layers=layers, exit=exit_)
+    except LayerstackError as e:
+        msg = str(e)
+        if msg.startswith(f"{source}:"):
+            raise
+        raise LayerstackError(f"{source}: {msg}") from None
+
+
+def load_stack(path) -> Stack:
+    """Read a stack file (TOML, schema in the module docstring). Relative table file names are
+    resolved against the file's directory. Raises :class:`LayerstackError` naming the file and
+    the offending table/key for any problem."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: stack file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise LayerstackError(f"{path}: invalid TOML: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read stack file: {e}") from None
+    return stack_from_dict(d, path.parent, source=str(path))
+
+
+def _scalar(x, what: str) -> float:
+    if not is_concrete(x) or np.ndim(x) != 0:
+        raise LayerstackError(f"stack_to_dict: {what} must be a concrete scalar, got {x!r}")
+    return float(np.asarray(x))
+
+
+def _material_to_dict(m: Material, what: str, out: dict) -> None:
+    if isinstance(m, Index):
+        if np.ndim(m.n) or np.ndim(m.k):
+            raise LayerstackError(f"stack_to_dict: {what} is sampled on a wavelength grid; use a Tabulated material")
+        out["n"] = _scalar(m.n, f"{what} n")
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Cauchy):
+        out["n"] = {"cauchy": [_scalar(m.A, f"{what} A"), _scalar(m.B, f"{what} B"), _scalar(m.C, f"{what} C")]}
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Sellmeier):
+        out["n"] = {"sellmeier": {"B": np.atleast_1d(np.asarray(m.B, float)).tolist(),
+                                  "C": np.atleast_1d(np.asarray(m.C, float)).tolist()}}
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Tabulated):
+        table = {"wavelength_nm": list(m.wavelength_nm), "n": np.asarray(m.n, float).tolist()}
+        if m.k is not None:
+            table["k"] = np.asarray(m.k, float).tolist()
+        out["n"] = table
+        k = 0.0
+    else:
+        raise LayerstackError(f"stack_to_dict: cannot write {what} of type {type(m).__name__}")
+    if k != 0.0:
+        out["k"] = k
+
+
+def _spectrum_to_dict(x, what: str):
+    if isinstance(x, TabulatedSpectrum):
+        return {"wavelength_nm": list(x.wavelength_nm), "values": np.asarray(x.values, float).tolist()}
+    if callable(x) or np.ndim(x):
+        raise LayerstackError(f"stack_to_dict: {what} must be a scalar or a TabulatedSpectrum")
+    return _scalar(x, what)
+
+
+def stack_to_dict(stack: Stack) -> dict:
+    """The inverse of :func:`stack_from_dict`: a dict in the stack-file schema, tables inline.
+
+    Works for stacks made of scalars, :class:`Index` (scalar), :class:`Cauchy`,
+    :class:`Sellmeier`, :class:`Tabulated` and :class:`TabulatedSpectrum`; raises
+    :class:`LayerstackError` for arrays sampled on a grid or traced values.
+    """
+    d: dict = {"ambient": {}}
+    _material_to_dict(stack.ambient, "ambient", d["ambient"])
+    layers = []
+    for i, layer in enumerate(stack.layers):
+        t: dict = {"name": layer.name or f"layer {i + 1}"}
+        _material_to_dict(layer.index, f"layer {i + 1}", t)
+        t["thickness_nm"] = _scalar(layer.thickness, f"layer {i + 1} thickness")
+        t["coherent"] = bool(layer.coherent)
+        if layer.alpha is not None:
+            t["alpha_per_nm"] = _spectrum_to_dict(layer.alpha, f"layer {i + 1} alpha")
+        layers.append(t)
+    d["layers"] = layers
+    if isinstance(stack.exit, Substrate):
+        d["substrate"] = {}
+        _material_to_dict(stack.exit.index, "substrate", d["substrate"])
+    else:
+        d["background"] = {}
+        _material_to_dict(stack.exit.index, "background", d["background"])
+        d["background"]["rho_g"] = _spectrum_to_dict(stack.exit.reflectance, "background rho_g")
+    return d
+
+
+# ------------------------------------------------------------------ spectra, wavelengths
+def save_spectra_csv(path, wavelength_nm, columns: Mapping[str, object], *, fmt: str = "%.10g") -> Path:
+    """Write ``wavelength_nm`` and the named spectra as a CSV file with a header row.
+
+    Args:
+        path: output file; missing parent directories are created.
+        wavelength_nm: ``(wl,)`` wavelengths in nm (first column).
+        columns: ``{name: (wl,) values}`` in column order.
+    Returns the path written.
+    """
+    path = Path(path)
+    wl = np.asarray(wavelength_nm, dtype=float)
+    if wl.ndim != 1:
+        raise LayerstackError(f"save_spectra_csv: wavelength_nm must be 1-D, got shape {wl.shape}")
+    names = ["wavelength_nm"]
+    data = [wl]
+    for name, values in columns.items():
+        name = str(name)
+        if not name or any(c in name for c in ',"\n\r'):
+            raise LayerstackError(f"save_spectra_csv: bad column name {name!r} (no commas, quotes or newlines)")
+        if name in names:
+            raise LayerstackError(f"save_spectra_csv: column {name!r} given twice")
+        v = np.asarray(values, dtype=float)
+        if v.shape != wl.shape:
+            raise LayerstackError(f"save_spectra_csv: column {name!r} has shape {v.shape}, expected {wl.shape}")
+        names.append(name)
+        data.append(v)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(path, np.column_stack(data), delimiter=",", header=",".join(names), comments="", fmt=fmt)
+    return path
+
+
+def parse_wavelengths(text) -> np.ndarray:
+    """Wavelength grid in nm from ``"start:stop:step"`` (stop included when it falls on the
+    grid), a single value ``"550"`` or a comma list ``"450,550,650"`` (strictly increasing).
+    """
+    t = str(text).strip()
+    bad = LayerstackError(
+        f"bad wavelengths {text!r}: use start:stop:step in nm (e.g. 380:780:5), one value (550) "
+        "or a comma list (450,550,650)"
+    )
+    try:
+        if ":" in t:
+            parts = t.split(":")
+            if len(parts) != 3:
+                raise bad
+            start, stop, step = (float(p) for p in parts)
+            if not all(map(math.isfinite, (start, stop, step))):
+                raise bad
+            if step <= 0:
+                raise LayerstackError(f"bad wavelengths {text!r}: step must be > 0")
+            if stop < start:
+                raise LayerstackError(f"bad wavelengths {text!r}: stop must be >= start")
+            count = int(math.floor((stop - start) / step + 1e-9)) + 1
+            wl = start + step * np.arange(count)
+        else:
+            wl = np.asarray([float(p) for p in t.split(",")], dtype=float)
+    except ValueError:
+        raise bad from None
+    if wl.size == 0 or not np.all(np.isfinite(wl)):
+        raise bad
+    if np.any(wl <= 0):
+        raise LayerstackError(f"bad wavelengths {text!r}: wavelengths must be > 0 nm")
+    if np.any(np.diff(wl) <= 0):
+        raise LayerstackError(f"bad wavelengths {text!r}: wavelengths must increase strictly")
+    return wl

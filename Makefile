@@ -26,7 +26,11 @@ test-slow: $(STAMP)
 	$(PY) -m pytest -n 2 -q -m slow
 
 bench: $(STAMP)
+	# peers: the CPU build of torch first (never the CUDA one), then tmm-fast without deps
+	$(PY) -m pip install -q torch==2.13.0 && $(PY) -m pip install -q --no-deps tmm-fast || echo "tmm-fast unavailable: reported as missing"
+	$(PY) -m pip install -q tmm-faster jaxlayerlumos || echo "some peers unavailable: reported as missing"
 	$(PY) -m benchmarks
+	$(PY) -m benchmarks.radiometric
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -1,0 +1,45 @@
+"""Test configuration for layerstack.
+
+* float64 is enabled here, for the tests only (the package itself never touches
+  ``jax_enable_x64``): interference-grade comparisons (1e-12) need it.
+* A hypothesis profile for CI: no deadline (first calls compile), a modest number of
+  examples, and derandomized so that a CI run is reproducible.  ``HYPOTHESIS_PROFILE=thorough``
+  selects a longer, randomized profile for local exploration.
+* ``tests/`` and the repository root are put on ``sys.path`` so that ``import reference`` and
+  ``import layerstack_jax`` work from any working directory without an installed package.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+_ROOT = os.path.dirname(_HERE)
+for _p in (_HERE, _ROOT):
+    if _p not in sys.path:
+        sys.path.insert(0, _p)
+
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile(
+    "ci",
+    deadline=None,
+    max_examples=25,
+    derandomize=True,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.register_profile(
+    "thorough",
+    deadline=None,
+    max_examples=500,
+    derandomize=False,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._quadrature import DEFAULT_NODES, hemispherical_rule
-from ._response import natural, stack_intensities, thick_media
+from ._response import natural, stack_intensities
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
@@ -95,11 +95,12 @@ def specular(stack: Stack, wavelength_nm, angle_rad, *, both_sides: bool = True)
 
 
 def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
-    thick = thick_media(rs.coherent)
+    # Split at the critical angle of every other medium. Thin films add no branch point (their
+    # response is even in their own q) but a sharp frustrated-TIR feature there, so they count too.
     if side == "front":
-        n_from, others = rs.n[0], [rs.n[i] for i in thick[1:]]
+        n_from, others = rs.n[0], list(rs.n[1:])
     elif side == "back":
-        n_from, others = rs.n[-1], [rs.n[i] for i in thick[:-1]]
+        n_from, others = rs.n[-1], list(rs.n[:-1])
     else:
         raise LayerstackError(f"side must be 'front' or 'back', got {side!r}")
     # at least (1,) so that the node axis stays in front of the wavelength axis

@@ -1,0 +1,300 @@
+"""Hemispherical (Lambertian) integrals: `diffuse(stack, wl, side)` and `hemispherical_rule`.
+
+References: the closed form of the diffuse reflectance of one dielectric interface (Stern /
+Judd), scipy ``quad`` of eq. 18, and ``reference.diffuse_stack_reference`` (adaptive quad of
+tmm.inc_tmm over μ = sin²θ with breakpoints at every critical angle) / ``diffuse_beer_stack``.
+
+Several random stacks are evaluated in ONE library call: every index, thickness and α is an
+array along the wavelength axis (allowed by the API), so stack *b* lives at "wavelength" b.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import layerstack_jax as ls
+import reference as ref
+from _helpers import INF, build_stack, max_abs
+
+TOL = 1e-10
+
+
+def _interface(n_from, n_to):
+    return ls.Stack(n_from, [], ls.Substrate(n_to))
+
+
+# ----------------------------------------------------------------------------------------------
+# one interface
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [1.33, 1.5, 2.0])
+def test_single_interface_against_closed_form_and_quad(n):
+    """Outside (light from air) and inside (light from the dense medium), each computed both as the
+    front of (1 | n) / (n | 1) and as the back of the mirrored stack; default node count."""
+    r_e, r_i = ref.diffuse_reflectance_interface_closed_form(n)
+    q_e = ref.diffuse_reflectance_interface(1.0, n)
+    q_i = ref.diffuse_reflectance_interface(n, 1.0)
+    assert abs(q_e - r_e) < 1e-13 and abs(q_i - r_i) < 1e-13  # the two references agree
+    wl = jnp.array([550.0])
+    for stack, side, expected in (
+        (_interface(1.0, n), "front", r_e),
+        (_interface(n, 1.0), "back", r_e),
+        (_interface(n, 1.0), "front", r_i),
+        (_interface(1.0, n), "back", r_i),
+    ):
+        d = ls.diffuse(stack, wl, side)
+        assert d.r.shape == (1,) and d.t.shape == (1,)
+        assert abs(float(d.r[0]) - expected) <= TOL, (n, side, float(d.r[0]), expected)
+        assert abs(float(d.t[0]) - (1.0 - expected)) <= TOL
+
+
+def test_judd_values_and_glass_internal_reflectance():
+    wl = jnp.array([550.0])
+    r_ext = float(ls.diffuse(_interface(1.0, 1.5), wl).r[0])
+    r_int = float(ls.diffuse(_interface(1.0, 1.5), wl, "back").r[0])
+    assert abs(r_ext - ref.JUDD_R_EXT_15) < 5e-5
+    assert abs(r_int - ref.JUDD_R_INT_15) < 5e-5
+    assert abs(r_int - ref.R_INT_15_EXACT) <= TOL
+
+
+def test_internal_external_relation_and_scale_invariance():
+    """1 − r_int = (1 − r_ext)/n² (energy conservation + reciprocity), only n_to/n_from matters;
+    with a wavelength-dependent index (one call, several n on the wl axis)."""
+    n = np.array([1.1, 1.33, 1.5, 1.8, 2.4])
+    wl = jnp.linspace(400.0, 800.0, n.size)
+    st = ls.Stack(1.0, [], ls.Substrate(ls.Index(jnp.asarray(n))))
+    ext = ls.diffuse(st, wl, "front")
+    inn = ls.diffuse(st, wl, "back")
+    assert max_abs(1.0 - inn.r, (1.0 - ext.r) / n**2) <= TOL
+    closed = np.array([ref.diffuse_reflectance_interface_closed_form(m) for m in n])
+    assert max_abs(ext.r, closed[:, 0]) <= TOL and max_abs(inn.r, closed[:, 1]) <= TOL
+    scaled = ls.Stack(1.7, [], ls.Substrate(ls.Index(jnp.asarray(1.7 * n))))
+    assert max_abs(ls.diffuse(scaled, wl).r, ext.r) <= 1e-13
+    assert max_abs(ls.diffuse(scaled, wl, "back").r, inn.r) <= 1e-13
+
+
+def test_traced_indices_give_the_same_integral():
+    """Inside jit the indices are tracers: the split points are laid out at run time instead of
+    trace time (all segments kept); same values; and no recompilation for a new index."""
+    f = jax.jit(lambda n: ls.diffuse(ls.Stack(1.0, [], ls.Substrate(n)), jnp.array([550.0]), "back"))
+    for n in (1.33, 1.5, 2.0):
+        r_i = ref.diffuse_reflectance_interface_closed_form(n)[1]
+        assert abs(float(f(jnp.asarray(n)).r[0]) - r_i) <= TOL
+    assert f._cache_size() == 1
+
+
+# ----------------------------------------------------------------------------------------------
+# hemispherical_rule itself
+# ----------------------------------------------------------------------------------------------
+def test_hemispherical_rule_integrates_square_root_singularities():
+    """∫₀¹ f dμ for f with square-root kinks at the split point μc = (n_j/n_from)² and at μ = 1:
+    the split rule is spectrally accurate (closed forms), the weights sum to 1."""
+    n_from, n_j = 1.5, 1.0
+    mu, w = ls.hemispherical_rule(np.array([n_from]), [n_j], nodes=ls.DEFAULT_NODES)
+    mu, w = np.asarray(mu)[:, 0], np.asarray(w)[:, 0]
+    mc = (n_j / n_from) ** 2
+    assert mu.shape == (2 * ls.DEFAULT_NODES,)
+    assert np.all((mu > 0) & (mu < 1)) and np.all(w > 0)
+    assert abs(w.sum() - 1.0) < 1e-14
+    assert abs(np.sum(w * np.sqrt(1 - mu)) - 2 / 3) < 1e-13
+    f = np.sqrt(np.abs(mu - mc))
+    exact = (2 / 3) * (mc**1.5 + (1 - mc) ** 1.5)
+    assert abs(np.sum(w * f) - exact) < 1e-13
+    # a split point at or above 1 (n_j >= n_from) adds no segment in the concrete path
+    mu2, _ = ls.hemispherical_rule(np.array([1.0]), [1.5, 1.0 + 0.2j])
+    assert np.asarray(mu2).shape[0] == ls.DEFAULT_NODES
+
+
+# ----------------------------------------------------------------------------------------------
+# random stacks against the adaptive-quad reference
+# ----------------------------------------------------------------------------------------------
+#: default run: one pattern per layer count (coherent, mixed, incoherent, mixed); the slow run
+#: adds the others. Each pattern is one library call per side (stacks batched on the wl axis).
+PATTERNS = ["c", "ci", "iii", "icci"]
+PATTERNS_ALL = PATTERNS + ["i", "ic", "cic", "ccic", "cc", "icic"]
+PER_PATTERN = 2
+
+
+def _random_diffuse_stack(rng, pattern):
+    while True:
+        n = [complex(rng.uniform(1.0, 1.7))]
+        d = [INF]
+        for ch in pattern:
+            if ch == "c":
+                n.append(complex(rng.uniform(1.1, 2.5), 0.0 if rng.random() < 0.5 else rng.uniform(0.0, 1.5)))
+                d.append(float(rng.uniform(10.0, 250.0)))
+            else:
+                n.append(complex(rng.uniform(1.1, 2.2), 0.0 if rng.random() < 0.5 else rng.uniform(0.0, 1e-4)))
+                d.append(float(rng.uniform(1e3, 3e4)))
+        n.append(complex(rng.uniform(1.0, 1.8)))
+        d.append(INF)
+        lam = float(rng.uniform(400.0, 800.0))
+        c = ["i", *pattern, "i"]
+        try:  # tmm.inc_tmm refuses some grazing back-propagations ("which beam is incoming")
+            refs = {side: ref.diffuse_stack_reference(n, d, c, lam, side) for side in ("front", "back")}
+        except AssertionError:
+            continue
+        return n, d, c, lam, refs
+
+
+@functools.lru_cache(maxsize=None)
+def _random_cases(seed=2718, per_pattern=PER_PATTERN, patterns=tuple(PATTERNS)):
+    rng = np.random.default_rng(seed)
+    return {p: [_random_diffuse_stack(rng, p) for _ in range(per_pattern)] for p in patterns}
+
+
+def _wl_batched_stack(cases):
+    """One Stack holding several same-pattern stacks along the wavelength axis."""
+    n = np.array([c[0] for c in cases])  # (B, media)
+    d = np.array([c[1] for c in cases])
+    coh = [ch == "c" for ch in cases[0][2][1:-1]]
+    layers = [
+        ls.Layer(ls.Index(jnp.asarray(n[:, j].real), jnp.asarray(n[:, j].imag)), jnp.asarray(d[:, j]), coherent=cj)
+        for j, cj in zip(range(1, n.shape[1] - 1), coh)
+    ]
+    stack = ls.Stack(
+        ls.Index(jnp.asarray(n[:, 0].real)), layers, ls.Substrate(ls.Index(jnp.asarray(n[:, -1].real)))
+    )
+    return stack, jnp.asarray([c[3] for c in cases])
+
+
+def _errors(nodes, patterns=tuple(PATTERNS), per_pattern=PER_PATTERN, seed=2718):
+    worst = {"r": 0.0, "t": 0.0}
+    where = None
+    for p, cases in _random_cases(seed, per_pattern, patterns).items():
+        stack, wl = _wl_batched_stack(cases)
+        out = {side: ls.diffuse(stack, wl, side, nodes=nodes) for side in ("front", "back")}
+        # Lambertian reciprocity (étendue): n0² t_front = n_exit² t_back, also for absorbing stacks
+        n0 = np.array([c[0][0].real for c in cases])
+        ne = np.array([c[0][-1].real for c in cases])
+        worst["recip"] = max(worst.get("recip", 0.0), max_abs(n0**2 * out["front"].t, ne**2 * out["back"].t))
+        for side, d in out.items():
+            for b, case in enumerate(cases):
+                r, t = case[4][side]
+                er, et = abs(float(d.r[b]) - r), abs(float(d.t[b]) - t)
+                if max(er, et) > max(worst["r"], worst["t"]):
+                    where = (p, side, case[0], case[1], case[3])
+                worst["r"], worst["t"] = max(worst["r"], er), max(worst["t"], et)
+    return worst, where
+
+
+def test_random_stacks_against_quad_reference_converged():
+    """1–4 layer incoherent / coherent / mixed stacks (absorbing thick layers and films, real outer
+    media), both sides: with 64 nodes per segment the engine is within 1e-10 of the adaptive
+    reference, i.e. its integrand and its segment layout are right; and n0² t_front = n_exit² t_back
+    (Lambertian reciprocity) for these absorbing stacks. The default node count is
+    checked by the xfail tests below and, on many random stacks, by the slow test."""
+    worst, where = _errors(64)
+    print(f"\ndiffuse random stacks, 64 nodes/segment: max errors {worst} at {where}")
+    assert max(worst.values()) <= TOL, (worst, where)
+
+
+@pytest.mark.slow
+def test_random_stacks_against_quad_reference_default_nodes_many():
+    """All patterns, 6 stacks each: 64 nodes within 1e-10; DEFAULT_NODES within 2e-5 (measured
+    accuracy today; the 1e-10 target is the xfail below)."""
+    kw = dict(patterns=tuple(PATTERNS_ALL), per_pattern=6, seed=31415)
+    worst, where = _errors(64, **kw)
+    assert max(worst.values()) <= TOL, (worst, where)
+    worst, where = _errors(ls.DEFAULT_NODES, **kw)
+    print(f"\ndiffuse random stacks, {ls.DEFAULT_NODES} nodes/segment: max errors {worst} at {where}")
+    assert max(worst.values()) <= 2e-5, (worst, where)
+
+
+_DEFAULT_NODES_BUG = (
+    "BUG: DEFAULT_NODES (24/segment, double cos map) misses 1e-10 on multilayer diffuse integrals: "
+    "up to ~1e-5 with a coherent film of lower index than the incidence medium (its critical angle "
+    "is not a split point), ~1e-8 with weakly absorbing thick layers below n_from, ~2e-9 for an "
+    "alpha layer seen from the background, ~3e-10 even for lossless thick-layer stacks"
+)
+
+#: minimal reproducers: (n_list, d_list, coherence pattern, side); error at 24 nodes in the test ids
+_DEFAULT_NODES_CASES = {
+    "low-index-film-8e-6": (
+        [1.2450839232519992, 1.0679127908536676, 1.52189528927039],
+        [INF, 249.80226761561715, INF],
+        "ici",
+        "front",
+    ),
+    "lossless-thick-3e-10": ([1.472, 2.083, 1.538, 1.475], [INF, 29434.5, 16372.2, INF], "iiii", "front"),
+    "absorbing-thick-1e-8": (
+        [1.433, 1.538 + 2.3e-05j, 1.812, 1.317 + 9.9e-05j, 1.772],
+        [INF, 1619.4, 27261.4, 27044.4, INF],
+        "iiiii",
+        "front",
+    ),
+}
+
+
+@pytest.mark.xfail(strict=True, reason=_DEFAULT_NODES_BUG)
+@pytest.mark.parametrize("case", list(_DEFAULT_NODES_CASES))
+def test_default_nodes_reach_1e10(case):
+    n, d, c, side = _DEFAULT_NODES_CASES[case]
+    r, t = ref.diffuse_stack_reference(n, d, list(c), 550.0, side)
+    out = ls.diffuse(build_stack(n, d, [x == "c" for x in c[1:-1]]), jnp.array([550.0]), side)
+    err = max(abs(float(out.r[0]) - r), abs(float(out.t[0]) - t))
+    assert err <= TOL, err
+
+
+def test_default_nodes_current_accuracy_on_the_xfail_cases():
+    """Guard for the xfail above: today's default-node error must not get worse than 2e-5."""
+    for n, d, c, side in _DEFAULT_NODES_CASES.values():
+        r, t = ref.diffuse_stack_reference(n, d, list(c), 550.0, side)
+        out = ls.diffuse(build_stack(n, d, [x == "c" for x in c[1:-1]]), jnp.array([550.0]), side)
+        assert abs(float(out.r[0]) - r) <= 2e-5 and abs(float(out.t[0]) - t) <= 2e-5, n
+
+
+@pytest.mark.xfail(strict=True, reason=_DEFAULT_NODES_BUG)
+def test_default_nodes_alpha_layer_back_side():
+    """1.0 | 10 µm, αh = 0.3, n = 1.5 | background 1.5, seen from the background: 1.9e-9 at 24 nodes."""
+    st = build_stack([1.0, 1.5, 1.5], [INF, 1e4, INF], [False], [0.3e-4])
+    r, t = ref.diffuse_beer_stack([1.0, 1.5, 1.5], [0.3], "back")
+    d = ls.diffuse(st, jnp.array([550.0]), "back")
+    assert abs(float(d.r[0]) - r) <= TOL and abs(float(d.t[0]) - t) <= TOL
+
+
+def test_alpha_layers_against_beer_quad_reference():
+    """α-given thick layers (real indices) against reference.diffuse_beer_stack, both sides: 64
+    nodes within 1e-10; the default nodes within 1e-7 (the xfail above tracks 1e-10). Cases of
+    the same layer count are batched on the wavelength axis (index, h and α arrays)."""
+    groups = [
+        [([1.0, 1.5, 1.5], [0.3]), ([1.0, 1.5, 1.5], [0.01]), ([1.2, 1.4, 1.6], [1.0])],
+        [([1.0, 1.5, 1.3, 1.5], [0.2, 0.5]), ([1.5, 1.33, 1.6, 1.0], [0.4, 0.0])],
+    ]
+    h = 1e4
+    worst = {64: 0.0, ls.DEFAULT_NODES: 0.0}
+    for cases in groups:
+        n = np.array([c[0] for c in cases])
+        ah = np.array([c[1] for c in cases])
+        layers = [
+            ls.Layer(ls.Index(jnp.asarray(n[:, j + 1])), h, coherent=False, alpha=jnp.asarray(ah[:, j] / h))
+            for j in range(ah.shape[1])
+        ]
+        st = ls.Stack(ls.Index(jnp.asarray(n[:, 0])), layers, ls.Substrate(ls.Index(jnp.asarray(n[:, -1]))))
+        wl = jnp.linspace(500.0, 600.0, len(cases))
+        for side in ("front", "back"):
+            expected = np.array([ref.diffuse_beer_stack(c[0], c[1], side) for c in cases])
+            for nodes in worst:
+                d = ls.diffuse(st, wl, side, nodes=nodes)
+                err = max(max_abs(d.r, expected[:, 0]), max_abs(d.t, expected[:, 1]))
+                worst[nodes] = max(worst[nodes], err)
+    print(f"\nalpha layers, diffuse: max errors by node count {worst}")
+    assert worst[64] <= TOL
+    assert worst[ls.DEFAULT_NODES] <= 1e-7  # αh = 0.01 near grazing: ~4e-8 at 24 nodes
+
+
+def test_lossless_stack_r_plus_t_is_one():
+    """Eq. 19: lossless stacks (coherent, incoherent, mixed), both sides, default nodes."""
+    st = build_stack(
+        [1.0, 1.38, 1.5, 2.1, 1.6, 1.33], [INF, 100.0, 2e4, 60.0, 3e4, INF], [True, False, True, False]
+    )
+    wl = jnp.array([450.0, 550.0, 650.0])
+    for side in ("front", "back"):
+        d = ls.diffuse(st, wl, side)
+        assert max_abs(d.r + d.t, 1.0) <= 1e-13
+        assert np.all((np.asarray(d.r) > 0) & (np.asarray(d.r) < 1))

@@ -14,10 +14,6 @@ import layerstack_jax as ls
 INF = np.inf
 
 
-def real_index(x) -> bool:
-    return complex(x).imag == 0.0
-
-
 def index_leaf(x):
     """``Index`` whose n and k are float64 JAX arrays (pytree leaves that vmap/jit can trace)."""
     x = complex(x)
@@ -84,8 +80,6 @@ def max_abs(a, b) -> float:
     return float(np.max(diff)) if not np.any(np.isnan(diff)) else float("nan")
 
 
-#: jitted entry points (one compile per stack structure and array shapes; Python-float leaves of
+#: jitted entry point (one compile per stack structure and array shapes; Python-float leaves of
 #: the stack are traced, so changing values never recompiles)
 specular_jit = jax.jit(ls.specular, static_argnames=("both_sides",))
-diffuse_jit = jax.jit(ls.diffuse, static_argnames=("side", "nodes"))
-reflectance_jit = jax.jit(ls.reflectance, static_argnames=("nodes",))

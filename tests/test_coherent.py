@@ -356,3 +356,34 @@ def test_output_shapes_and_scalar_angle():
     assert nat.R_front.shape == (1, 4)
     Rr, Tr = ref.coh_stack_R_T("u", [1.0, 1.4 + 0.1j, 1.5], [INF, 100.0, INF], 0.3, 400.0)
     assert abs(float(nat.R_front[0, 0]) - Rr) <= TOL and abs(float(nat.T_front[0, 0]) - Tr) <= TOL
+
+
+def test_dispersion_models_feed_the_engine():
+    """Cauchy, Sellmeier (BK7: n_d = 1.5168 at 587.6 nm) and Tabulated (linear interpolation)
+    films and substrates give the same response as Index with the index computed here in numpy."""
+    wl = np.array([420.0, 587.6, 700.0])
+    lam_um2 = (wl * 1e-3) ** 2
+    B = np.array([1.03961212, 0.231792344, 1.01046945])
+    C = np.array([0.00600069867, 0.0200179144, 103.560653])
+    n_bk7 = np.sqrt(1 + np.sum(B[:, None] * lam_um2 / (lam_um2 - C[:, None]), axis=0))
+    assert abs(n_bk7[1] - 1.5168) < 1e-4
+    n_cauchy = 1.46 + 0.0045 / lam_um2 + 1e-4 / lam_um2**2
+    table_wl, table_n, table_k = [400.0, 500.0, 800.0], [2.3, 2.1, 2.0], [0.5, 0.2, 0.0]
+    n_tab = np.interp(wl, table_wl, table_n) + 1j * np.interp(wl, table_wl, table_k)
+    models = ls.Stack(
+        1.0,
+        [
+            ls.Layer(ls.Cauchy(1.46, 0.0045, 1e-4, 0.01), 120.0),
+            ls.Layer(ls.Tabulated(table_wl, table_n, table_k), 60.0),
+        ],
+        ls.Substrate(ls.Sellmeier(list(B), list(C))),
+    )
+    out = ls.specular(models, jnp.asarray(wl), jnp.array([0.0, 0.7]))
+    for iw, lam in enumerate(wl):
+        n = [1.0, n_cauchy[iw] + 0.01j, n_tab[iw], n_bk7[iw]]
+        d = [INF, 120.0, 60.0, INF]
+        for ia, th in enumerate((0.0, 0.7)):
+            for ip, pol in enumerate("sp"):
+                R, T = ref.coh_stack_R_T(pol, n, d, th, lam)
+                assert abs(float(out.R_front[ia, ip, iw]) - R) <= TOL
+                assert abs(float(out.T_front[ia, ip, iw]) - T) <= TOL

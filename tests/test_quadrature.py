@@ -207,22 +207,23 @@ def test_random_stacks_against_quad_reference_default_nodes_many():
 
 
 _DEFAULT_NODES_BUG = (
-    "BUG: DEFAULT_NODES (24/segment, double cos map) misses 1e-10 on multilayer diffuse integrals: "
-    "up to ~1e-5 with a coherent film of lower index than the incidence medium (its critical angle "
-    "is not a split point), ~1e-8 with weakly absorbing thick layers below n_from, ~2e-9 for an "
-    "alpha layer seen from the background, ~3e-10 even for lossless thick-layer stacks"
+    "BUG: DEFAULT_NODES (24/segment, double cos map) misses 1e-10 on multilayer diffuse integrals "
+    "(measured at 24 nodes, after splitting at every medium's critical angle): 3e-9 with a coherent film "
+    "of lower index than the incidence medium, 1.1e-8 with weakly absorbing thick layers below n_from, "
+    "1.9e-9 for an alpha layer seen from the background, 2.8e-10 for lossless thick layers; "
+    "32 nodes: <= 2.7e-9, 48 nodes: <= 1.7e-11 on the same cases"
 )
 
-#: minimal reproducers: (n_list, d_list, coherence pattern, side); error at 24 nodes in the test ids
+#: minimal reproducers: (n_list, d_list, coherence pattern, side)
 _DEFAULT_NODES_CASES = {
-    "low-index-film-8e-6": (
+    "low-index-film": (
         [1.2450839232519992, 1.0679127908536676, 1.52189528927039],
         [INF, 249.80226761561715, INF],
         "ici",
         "front",
     ),
-    "lossless-thick-3e-10": ([1.472, 2.083, 1.538, 1.475], [INF, 29434.5, 16372.2, INF], "iiii", "front"),
-    "absorbing-thick-1e-8": (
+    "lossless-thick": ([1.472, 2.083, 1.538, 1.475], [INF, 29434.5, 16372.2, INF], "iiii", "front"),
+    "absorbing-thick": (
         [1.433, 1.538 + 2.3e-05j, 1.812, 1.317 + 9.9e-05j, 1.772],
         [INF, 1619.4, 27261.4, 27044.4, INF],
         "iiiii",
@@ -298,3 +299,37 @@ def test_lossless_stack_r_plus_t_is_one():
         d = ls.diffuse(st, wl, side)
         assert max_abs(d.r + d.t, 1.0) <= 1e-13
         assert np.all((np.asarray(d.r) > 0) & (np.asarray(d.r) < 1))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="BUG: under jit the quadrature keeps zero-width segments (split point (n_j/n_from)^2 = 1 for a "
+    "thick layer index-matched to the incidence medium) whose nodes sit at mu = 1 exactly; there a "
+    "zero-thickness coherent film between two q = 0 media is a 0/0 in the Rouard recursion "
+    "(r = -1, +1, e^{2i phi} = 1) and weight 0 * NaN = NaN. Eager (concrete) evaluation drops the "
+    "empty segment and is fine.",
+)
+def test_jit_zero_thickness_film_between_index_matched_media():
+    """Williams–Clapper stack (varnish n = n_g = 1.5) with a zero-thickness film (padding, PHYSICS.md
+    trap 7, or a fitted thickness reaching 0) under the varnish: same value eager and under jit."""
+    wl = jnp.array([550.0])
+    st = ls.Stack(
+        1.0,
+        [ls.Layer(1.5, 3e4, coherent=False, alpha=1e-5), ls.Layer(2.0, 0.0)],
+        ls.LambertianBackground(1.5, 0.7),
+    )
+    expected = ref.shore_spoonhower(1.0, 1.5, 0.3, 0.7, math.radians(8.0))
+    eager = float(ls.reflectance(st, wl, ls.Sphere(8.0))[0])
+    assert abs(eager - expected) <= 1e-7  # the eager value is right (default-node accuracy)
+    jitted = float(jax.jit(lambda s: ls.reflectance(s, wl, ls.Sphere(8.0)))(st)[0])
+    assert abs(jitted - eager) <= 1e-13, jitted
+
+
+def test_jit_and_eager_quadrature_layouts_agree():
+    """Concrete (eager: empty segments dropped) and traced (jit: all segments) layouts give the same
+    diffuse values on a mixed stack with thick layers below and above n_from."""
+    st = build_stack([1.0, 1.9 + 0.05j, 1.45, 1.3 + 1e-5j, 1.6], [INF, 80.0, 2e4, 1e4, INF], [True, False, False])
+    wl = jnp.array([450.0, 650.0])
+    a = ls.diffuse(st, wl, "back")
+    b = jax.jit(lambda s: ls.diffuse(s, wl, "back"))(st)
+    assert max_abs(a.r, b.r) <= 1e-12 and max_abs(a.t, b.t) <= 1e-12

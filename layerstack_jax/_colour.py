@@ -31,7 +31,8 @@ Conventions and method
 * **Range.** The data grid must cover the visible range 380–780 nm (CIE 15:2004 §7.2). A grid
   that does not (e.g. 400–700 nm) raises :class:`LayerstackError` unless
   ``extrapolate="constant"`` is asked for: the grid is then extended, at its own end
-  intervals, down to 380 nm and up to 780 nm and the spectrum is **held at its end values**
+  intervals, until it reaches 380 nm and 780 nm (the last added node may lie just beyond), and
+  the spectrum is **held at its end values**
   there (the recommendation of CIE 15:2004 §7.2.2 and ASTM E308 §7.3.2); the extended nodes'
   weights are folded onto the end nodes, so the call is still one matrix product. This equals
   colour-science's integration of a spectrum that it extrapolates (constantly) onto the extended
@@ -65,7 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._validate import LayerstackError
+from ._validate import LayerstackError, is_concrete
 
 __all__ = [
     "ColourSpace",
@@ -212,6 +213,8 @@ class ColourSpace(eqx.Module):
 
     def __init__(self, wavelength_nm, observer: str = "CIE 1931 2 Degree Standard Observer",
                  illuminant="D65", *, extrapolate: str = "error", adaptation: Optional[str] = "CAT02"):
+        if not is_concrete(wavelength_nm):
+            raise LayerstackError("ColourSpace: build it outside jit (its wavelength grid must be concrete)")
         wl = np.asarray(wavelength_nm, dtype=float)
         if wl.ndim != 1 or wl.size < 2 or not np.all(np.isfinite(wl)) or np.any(np.diff(wl) <= 0):
             raise LayerstackError("ColourSpace: wavelength_nm must be a strictly increasing 1-D grid (>= 2 points)")

@@ -128,6 +128,15 @@ def test_names_and_errors():
         ColourSpace(SHAPE_5NM.wavelengths).XYZ(np.ones(80))
 
 
+def test_illuminant_as_spectral_distribution_and_inside_jit():
+    sd = colour.SDS_ILLUMINANTS["D50"].copy()
+    a = ColourSpace(SHAPE_5NM.wavelengths, illuminant=sd)
+    b = ColourSpace(SHAPE_5NM.wavelengths, illuminant="D50")
+    np.testing.assert_array_equal(np.asarray(a.weights), np.asarray(b.weights))
+    with pytest.raises(LayerstackError, match="outside jit"):
+        jax.jit(lambda w: ColourSpace(w).white_XYZ)(jnp.asarray(SHAPE_5NM.wavelengths))
+
+
 def test_clip_and_black():
     cs = ColourSpace(SHAPE_5NM.wavelengths)
     XYZ = jnp.array([[80.0, 20.0, 5.0], [0.0, 0.0, 0.0]])  # a saturated red out of gamut; black

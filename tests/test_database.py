@@ -194,3 +194,14 @@ def test_stack_of_database_materials_vs_tmm():
     # outside Devore's range (430–1530 nm) the prediction refuses
     with pytest.raises(ls.LayerstackError, match="outside the data range"):
         ls.specular(stack, np.array([400.0, 500.0]), angle)
+
+
+def test_shipped_example_with_database_materials():
+    from pathlib import Path
+
+    stack = ls.load_stack(Path(__file__).resolve().parent.parent / "examples" / "silica_on_gold.toml")
+    assert isinstance(stack.layers[0].index, ls.DatabaseFormula)
+    assert isinstance(stack.exit.index, ls.Tabulated)
+    R = np.asarray(ls.reflectance(stack, np.arange(380.0, 781.0, 20.0), ls.Specular(8.0, "R")))
+    assert np.all((R > 0) & (R < 1))
+    assert R[-1] > 0.9 and R[0] < 0.5  # gold: dark in the blue, bright in the red

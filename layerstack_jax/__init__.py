@@ -11,6 +11,18 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
+from ._colour import OBSERVERS as OBSERVERS
+from ._colour import VISIBLE_RANGE_NM as VISIBLE_RANGE_NM
+from ._colour import ColourSpace as ColourSpace
+from ._colour import delta_e_2000 as delta_e_2000
+from ._colour import delta_e_ab as delta_e_ab
+from ._colour import srgb_encode as srgb_encode
+from ._colour import xyz_to_lab as xyz_to_lab
+from ._colour import xyz_to_xyy as xyz_to_xyy
+from ._database import DatabaseFormula as DatabaseFormula
+from ._database import database_version as database_version
+from ._database import material as material
+from ._database import material_sources as material_sources
 from ._fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._fresnel import normal_wavevector as normal_wavevector
 from ._geometry import BRDF as BRDF

@@ -41,8 +41,12 @@ Dispersion: wherever ``n`` is accepted it may also be an inline table with exact
 * ``n = { table = "file.csv" }`` — CSV with columns ``wavelength_nm, n`` and optionally ``k``
   (if the file has no ``k`` column, the ``k`` key gives a constant k);
 * ``n = { wavelength_nm = [...], n = [...], k = [...] }`` — the same table inline (k optional);
-* ``n = { material = "Au" }`` — a named material; reserved for the material database, not yet
-  available (raises an error).
+* ``n = { material = "Au", source = "Johnson" }`` — a real material from the
+  refractiveindex.info database shipped offline (:func:`~layerstack_jax.material`): ``material``
+  is the database's material id (or a ``"shelf/book/page"`` path), ``source`` the page id or
+  words of its title (``"Johnson and Christy"``), needed when the material has several pages;
+  optional ``shelf``. n and k both come from the database (no ``k`` key); wavelengths outside
+  the data's range are an error.
 
 Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
 an error. Relative file names are taken relative to the directory of the TOML file.
@@ -268,7 +272,8 @@ def _material(where: _Where, table: Mapping, base_dir: Path, *, allow_k: bool, l
         return _tabulated(where, wl, nn, kk, k_given, k, allow_k, f"{label} (inline table)")
 
     chosen = [name for name in spec if name in _DISPERSION_KEYS]
-    _reject_unknown(_Where(where.source, f"{where.table}: key 'n'"), spec, _DISPERSION_KEYS)
+    extra = ("source", "shelf") if "material" in spec else ()
+    _reject_unknown(_Where(where.source, f"{where.table}: key 'n'"), spec, _DISPERSION_KEYS + extra)
     if len(chosen) != 1:
         raise where.error(
             "give exactly one of cauchy = [...], sellmeier = {B=[...], C=[...]}, table = \"file.csv\", "
@@ -278,11 +283,7 @@ def _material(where: _Where, table: Mapping, base_dir: Path, *, allow_k: bool, l
     kind = chosen[0]
     value = spec[kind]
     if kind == "material":
-        raise where.error(
-            f"unknown material {value!r}: the material database is not available yet; give n (and k) as numbers, "
-            "a cauchy/sellmeier formula or a table",
-            "n",
-        )
+        return _database_material(where, spec, k_given, allow_k)
     if kind == "cauchy":
         coef = _number_list(where, "n", value, "cauchy coefficients [A, B, C]")
         if coef.size > 3:
@@ -306,6 +307,26 @@ def _material(where: _Where, table: Mapping, base_dir: Path, *, allow_k: bool, l
     path, cols = _read_table(where, "n", base_dir, value, ("wavelength_nm", "n"), ("k",))
     return _tabulated(where, cols["wavelength_nm"], cols["n"], cols.get("k"), k_given, k, allow_k,
                       f"{path.name} ({label})", file=str(value))
+
+
+def _database_material(where: _Where, spec: Mapping, k_given: bool, allow_k: bool) -> Material:
+    """``n = { material = "Au", source = "Johnson", shelf = "main" }``: the refractiveindex.info
+    database (n and k from the same page; no separate ``k`` key)."""
+    from ._database import material
+
+    for key in ("material", "source", "shelf"):
+        if key in spec and not isinstance(spec[key], str):
+            raise where.error(f"{key} must be a string, got {spec[key]!r}", "n")
+    if k_given:
+        raise where.error("k comes from the material database with n = { material = ... }; remove the k key", "k")
+    try:
+        m = material(spec["material"], spec.get("source"), shelf=spec.get("shelf"))
+    except LayerstackError as e:
+        raise where.error(str(e), "n") from None
+    k_table = getattr(m, "k", None)
+    if not allow_k and k_table is not None and np.any(np.asarray(k_table) != 0):
+        raise where.error(f"{m.name} absorbs (k > 0 in the database), but this medium must be transparent", "n")
+    return m
 
 
 def _tabulated(where, wl, n, k_col, k_given, k, allow_k, name, file=None) -> Tabulated:

@@ -11,6 +11,10 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
+from ._ellipsometry import Ellipsometry as Ellipsometry
+from ._ellipsometry import ellipsometry as ellipsometry
+from ._ellipsometry import psi_delta as psi_delta
+from ._ellipsometry import reflection_amplitudes as reflection_amplitudes
 from ._fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._fresnel import normal_wavevector as normal_wavevector
 from ._geometry import BRDF as BRDF
@@ -30,6 +34,16 @@ from ._materials import Index as Index
 from ._materials import Material as Material
 from ._materials import Sellmeier as Sellmeier
 from ._materials import Tabulated as Tabulated
+from ._polarimetry import apply_mueller as apply_mueller
+from ._polarimetry import cloude_eigenvalues as cloude_eigenvalues
+from ._polarimetry import coherency_matrix as coherency_matrix
+from ._polarimetry import degree_of_polarization as degree_of_polarization
+from ._polarimetry import diffuse_mueller as diffuse_mueller
+from ._polarimetry import is_physical as is_physical
+from ._polarimetry import mueller_from_jones as mueller_from_jones
+from ._polarimetry import polarized_brdf as polarized_brdf
+from ._polarimetry import specular_mueller as specular_mueller
+from ._polarimetry import stokes as stokes
 from ._quadrature import DEFAULT_NODES as DEFAULT_NODES
 from ._quadrature import hemispherical_rule as hemispherical_rule
 from ._stack import LambertianBackground as LambertianBackground

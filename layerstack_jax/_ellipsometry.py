@@ -98,8 +98,9 @@ def psi_delta(r_s, r_p):
     """
     psi = _safe_atan2(_safe_abs(r_p), _safe_abs(r_s))
     c = r_p * jnp.conj(r_s)
-    # + 0.0 turns a signed zero -0.0 into +0.0: a real negative rho gives +pi, never -pi.
-    delta = _safe_atan2(jnp.imag(c) + 0.0, jnp.real(c))
+    delta = _safe_atan2(jnp.imag(c), jnp.real(c))
+    # atan2(-0.0, x < 0) = -pi: a real negative rho must give +pi (range (-pi, pi]).
+    delta = jnp.where(delta <= -jnp.pi, jnp.pi, delta)
     return psi, delta
 
 

@@ -155,9 +155,9 @@ def polarized_brdf(
         Array ``(*angle, 2, 2, wl)``: axis −3 illumination polarization, axis −2 analyser,
         each ``(s, p)``; e.g. ``f[..., 1, 0, :]`` is Ellis's :math:`f_{ps}` (p in, s out).
     """
+    th_i, th_v = _angles(incidence_deg, viewing_deg)
     rs = resolve(stack, wavelength_nm)
     K = _background_factor(stack, rs, nodes)
-    th_i, th_v = _angles(incidence_deg, viewing_deg)
     T_i = jnp.moveaxis(_T_pol(rs, th_i), 0, -2)  # (*angle, 2, wl)
     T_v = jnp.moveaxis(_T_pol(rs, th_v), 0, -2)
     return 0.5 * K * T_i[..., :, None, :] * T_v[..., None, :, :]
@@ -180,9 +180,9 @@ def diffuse_mueller(
     projecting on the analyser *b* gives :func:`polarized_brdf`. Arguments as there; returns
     ``(*angle, 4, 4, wl)`` (conventions: module docstring).
     """
+    th_i, th_v = _angles(incidence_deg, viewing_deg)
     rs = resolve(stack, wavelength_nm)
     K = _background_factor(stack, rs, nodes)
-    th_i, th_v = _angles(incidence_deg, viewing_deg)
     v_in = _partial_polarizer_vector(_T_pol(rs, th_i))  # (*angle, 4, wl)
     v_out = _partial_polarizer_vector(_T_pol(rs, th_v))
     return K * v_out[..., :, None, :] * v_in[..., None, :, :]

@@ -46,6 +46,10 @@ from ._polarimetry import specular_mueller as specular_mueller
 from ._polarimetry import stokes as stokes
 from ._quadrature import DEFAULT_NODES as DEFAULT_NODES
 from ._quadrature import hemispherical_rule as hemispherical_rule
+from ._rough import RoughBRDF as RoughBRDF
+from ._rough import microfacet_distribution as microfacet_distribution
+from ._rough import rough_brdf as rough_brdf
+from ._rough import smith_lambda as smith_lambda
 from ._stack import LambertianBackground as LambertianBackground
 from ._stack import Layer as Layer
 from ._stack import Stack as Stack

@@ -328,3 +328,99 @@ def test_bad_input_raises():
         ls.polarized_brdf(_paint(), WL, 10.0, 95.0)
     with pytest.raises(ls.LayerstackError, match="stokes"):
         ls.stokes("circular")
+
+
+# ------------------------------------------------------------------------- rough top (§4.2)
+rough_jit = jax.jit(ls.rough_brdf, static_argnames=("distribution", "nodes", "facet_nodes", "include_diffuse"))
+
+
+def _lossless_white():
+    """Lossless stack (dielectric film on a varnish) over a perfect white background (ρg = 1)."""
+    return ls.Stack(
+        1.0, [ls.Layer(ls.Index(2.3, 0.0), 120.0), ls.Layer(1.5, 20_000.0, coherent=False)], ls.LambertianBackground(1.5, 1.0)
+    )
+
+
+def _gl(n, a, b):
+    x, w = np.polynomial.legendre.leggauss(n)
+    return a + (b - a) * (x + 1) / 2, w * (b - a) / 2
+
+
+def _lobe_albedo(st, wl, theta_i_deg, alpha, dist, n=128):
+    """∫ f_spec cos θo dω_o, integrated over half vectors h (dω_o = 4 (i·h) dω_h), θh clustered
+    by tan θh = α tan(πv/2) (v Gauss–Legendre); independent of the library's facet rule."""
+    v, wv = _gl(n, 0.0, 1.0)
+    th_h = np.arctan(alpha * np.tan(0.5 * np.pi * v))
+    dth = wv * alpha * 0.5 * np.pi / np.cos(0.5 * np.pi * v) ** 2 / (1 + (alpha * np.tan(0.5 * np.pi * v)) ** 2)
+    phi, wphi = _gl(n, 0.0, np.pi)  # symmetric in φ -> double
+    TH, PH = np.meshgrid(th_h, phi, indexing="ij")
+    W = np.outer(dth, wphi) * 2 * np.sin(TH)
+    ti = math.radians(theta_i_deg)
+    i = np.array([math.sin(ti), 0.0, math.cos(ti)])
+    h = np.stack([np.sin(TH) * np.cos(PH), np.sin(TH) * np.sin(PH), np.cos(TH)], axis=-1)
+    ih = h @ i
+    o = 2 * ih[..., None] * h - i
+    ok = (o[..., 2] > 1e-9) & (ih > 0)
+    th_o = np.degrees(np.arccos(np.clip(np.where(ok, o[..., 2], 1.0), -1, 1)))
+    az = np.degrees(np.arctan2(o[..., 1], o[..., 0]))
+    f = np.asarray(rough_jit(st, wl, theta_i_deg, th_o, az, roughness=alpha, distribution=dist, include_diffuse=False).specular)
+    integrand = f * (np.where(ok, o[..., 2], 0.0) * 4 * np.where(ok, ih, 0.0) * W)[..., None]
+    return integrand.sum(axis=(0, 1))
+
+
+def _diffuse_albedo(st, wl, theta_i_deg, alpha, dist):
+    """∫ f_diff cos θo dω_o = π ∫_0^1 f_diff dμ (f_diff does not depend on the azimuth)."""
+    mu, w = _gl(48, 0.0, 1.0)
+    f = np.asarray(rough_jit(st, wl, theta_i_deg, np.degrees(np.arcsin(np.sqrt(mu))), 180.0, roughness=alpha, distribution=dist).diffuse)
+    return np.pi * (w[:, None] * f).sum(axis=0)
+
+
+@pytest.mark.parametrize("dist", ["ggx", "beckmann"])
+def test_rough_white_furnace(dist):
+    """Lossless stack over ρg = 1: directional albedo ≤ 1 at all incidences and roughnesses
+    (single-scattering microfacets lose only the shadowed light: albedo > 0.9 here). The 1e-5
+    allowance is the quadrature error of the two albedo integrals (near normal incidence the
+    true albedo is 1 minus a Smith loss of ~1e-6)."""
+    st, wl = _lossless_white(), np.array([550.0])
+    for alpha in (0.1, 0.5):
+        for th in (0.0, 60.0, 85.0):
+            a = _lobe_albedo(st, wl, th, alpha, dist) + _diffuse_albedo(st, wl, th, alpha, dist)
+            assert np.all(a <= 1.0 + 1e-5), (alpha, th, a)
+            assert np.all(a > 0.9), (alpha, th, a)
+
+
+def test_rough_tends_to_smooth():
+    """α → 0: the lobe integrates to the stack's specular reflectance R(θi) and the diffuse part
+    to the smooth natural-light BRDF (Simonot eq. 76)."""
+    st = _stacks()["mixed"]
+    wl = WL
+    alpha = 2e-3
+    for th in (0.0, 30.0, 60.0):
+        R = np.asarray(ls.specular(st, wl, math.radians(th), both_sides=False).natural().R_front)
+        np.testing.assert_allclose(_lobe_albedo(st, wl, th, alpha, "ggx"), R, rtol=2e-3)
+    rough = np.asarray(rough_jit(st, wl, INC, VIEW, 90.0, roughness=alpha, distribution="beckmann").diffuse)
+    smooth = np.asarray(_diffuse_all(st, wl, INC, VIEW)[2])  # same shapes as the fixture: cached
+    np.testing.assert_allclose(rough, smooth, rtol=1e-3)
+
+
+@pytest.mark.parametrize("dist", ["ggx", "beckmann"])
+def test_microfacet_normalizations(dist):
+    """∫ D cos θh dω_h = 1 and ∫ D G1(i) max(0, i·h)/cos θi dω_h = 1 (Smith), by quadrature."""
+    alpha = 0.3
+    th, wth = _gl(400, 0.0, 0.5 * np.pi)
+    phi, wphi = _gl(200, 0.0, 2 * np.pi)
+    TH, PH = np.meshgrid(th, phi, indexing="ij")
+    W = np.outer(wth, wphi) * np.sin(TH)
+    D = np.asarray(ls.microfacet_distribution(jnp.cos(TH), alpha, dist))
+    assert np.sum(D * np.cos(TH) * W) == pytest.approx(1.0, abs=1e-6)
+    for ti in (0.3, 1.2):
+        ih = np.sin(ti) * np.sin(TH) * np.cos(PH) + np.cos(ti) * np.cos(TH)
+        g1 = 1 / (1 + float(ls.smith_lambda(jnp.cos(ti), alpha, dist)))
+        assert np.sum(D * g1 * np.maximum(ih, 0) / np.cos(ti) * W) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_rough_bad_input():
+    with pytest.raises(ls.LayerstackError, match="roughness"):
+        ls.rough_brdf(_paint(), WL, 10.0, 20.0, roughness=0.0)
+    with pytest.raises(ls.LayerstackError, match="distribution"):
+        ls.rough_brdf(_paint(), WL, 10.0, 20.0, roughness=0.1, distribution="phong")

@@ -424,3 +424,26 @@ def test_rough_bad_input():
         ls.rough_brdf(_paint(), WL, 10.0, 20.0, roughness=0.0)
     with pytest.raises(ls.LayerstackError, match="distribution"):
         ls.rough_brdf(_paint(), WL, 10.0, 20.0, roughness=0.1, distribution="phong")
+
+
+# ------------------------------------------------------------------------- command line
+def test_cli_polarization_and_ellipsometry_columns(tmp_path):
+    """`layerstack predict --polarization pp --ellipsometry θ` writes f_pp of the brdf geometry
+    (other geometries unchanged) and psi/Delta columns equal to the library's."""
+    from layerstack_jax.cli import main
+    from layerstack_jax.io import load_stack
+
+    root = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples"
+    paint, film = root / "varnished_painting.toml", root / "thin_film_on_metal.toml"
+    out = tmp_path / "p.csv"
+    assert main(["predict", str(paint), "-w", "500,600", "-g", "brdf:45:10", "--polarization", "pp", "-o", str(out)]) == 0
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    f = np.asarray(ls.polarized_brdf(load_stack(str(paint)), np.array([500.0, 600.0]), 45.0, 10.0))
+    np.testing.assert_allclose(table["brdf4510_pp"], f[1, 1], rtol=1e-9)
+    out2 = tmp_path / "e.csv"
+    assert main(["predict", str(film), "-w", "500,600", "-g", "specular:60:R", "--ellipsometry", "70", "-o", str(out2)]) == 0
+    t2 = np.genfromtxt(out2, delimiter=",", names=True)
+    e = ls.ellipsometry(load_stack(str(film)), np.array([500.0, 600.0]), 70.0)
+    np.testing.assert_allclose(t2["psi_70"], np.asarray(e.psi_deg), rtol=1e-9)
+    np.testing.assert_allclose(t2["delta_70"], np.asarray(e.delta_deg), rtol=1e-9)
+    assert main(["predict", str(paint), "-w", "500", "-g", "45/0", "--polarization", "pp", "-o", str(out)]) == 2

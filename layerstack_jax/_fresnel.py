@@ -11,7 +11,8 @@ Conventions (fixed here for the whole package)
   decays, or an evanescent wave beyond the critical angle) and :math:`\operatorname{Re} q \ge 0`
   when :math:`\operatorname{Im} q = 0`.
 * Fresnel amplitudes follow Born & Wolf / the ``tmm`` package: for p the ratio of electric fields
-  with the sign convention in which :math:`r_s = r_p` at normal incidence.
+  with the sign convention of ``tmm.interface_r``, in which :math:`r_p = -r_s` at normal
+  incidence (so the ellipsometric :math:`\Delta` is 180° there; :mod:`layerstack_jax._ellipsometry`).
 * Polarization axis: index 0 is *s* (TE, perpendicular), index 1 is *p* (TM, parallel).
 """
 

@@ -109,6 +109,8 @@ def _describe(stack: Stack) -> str:
 
 
 def _quantity_label(geometry) -> str:
+    if geometry is None:  # --ellipsometry columns
+        return "degrees"
     if isinstance(geometry, BRDF):
         return "BRDF (1/sr)"
     if isinstance(geometry, Directional):
@@ -175,7 +177,29 @@ def _add_predict_parser(sub) -> None:
     p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
     p.add_argument("--nodes", type=_positive_int, default=DEFAULT_NODES, metavar="N",
                    help=f"Gauss-Legendre nodes per angular segment for diffuse integrals (default {DEFAULT_NODES})")
+    p.add_argument("--polarization", choices=("ss", "sp", "ps", "pp", "mueller"), metavar="AB",
+                   help="for the brdf:I:V geometries (others stay natural light): the polarization-resolved diffuse BRDF f_AB (A the "
+                   "illumination, B the analyser, s or p), or 'mueller' for its 16 Mueller elements "
+                   "(columns GEOM_mIJ)")
+    p.add_argument("--ellipsometry", action="append", type=float, metavar="ANGLE",
+                   help="also write psi_ANGLE and delta_ANGLE (degrees; Delta in (-180, 180], tmm's + 180) "
+                   "of a coherent stack; repeat for several angles")
     p.set_defaults(func=_cmd_predict)
+
+
+def _polarized_columns(stack, wavelength, name, geometry, polarization, nodes) -> dict:
+    """Columns for ``--polarization`` of one brdf:I:V geometry (diffuse part, 1/sr)."""
+    from ._polarimetry import diffuse_mueller, polarized_brdf
+
+    if not isinstance(geometry, BRDF):
+        raise LayerstackError(f"geometry {name!r}: --polarization applies to brdf:I:V geometries only")
+    i, v = geometry.incidence_deg, geometry.viewing_deg
+    if polarization == "mueller":
+        M = np.asarray(diffuse_mueller(stack, wavelength, i, v, nodes=nodes), dtype=float)
+        return {f"{name}_m{a}{b}": M[a, b] for a in range(4) for b in range(4)}
+    f = np.asarray(polarized_brdf(stack, wavelength, i, v, nodes=nodes), dtype=float)
+    a, b = ("sp".index(c) for c in polarization)
+    return {f"{name}_{polarization}": f[a, b]}
 
 
 def _cmd_predict(args) -> int:
@@ -188,6 +212,8 @@ def _cmd_predict(args) -> int:
             resolve(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
         except LayerstackError as e:
             raise LayerstackError(f"{args.stack}: {e}") from None
+        if args.polarization and not any(isinstance(g, BRDF) for _, g in requested):
+            raise LayerstackError("--polarization needs at least one brdf:I:V geometry")
         columns, geometries = {}, {}
         for name, geometry in requested:
             try:
@@ -196,8 +222,26 @@ def _cmd_predict(args) -> int:
                 values = reflectance(stack, wavelength, geometry, nodes=args.nodes)
             except LayerstackError as e:
                 raise LayerstackError(f"geometry {name!r}: {e}") from None
+            if args.polarization and isinstance(geometry, BRDF):
+                try:
+                    extra = _polarized_columns(stack, wavelength, name, geometry, args.polarization, args.nodes)
+                except LayerstackError as e:
+                    raise LayerstackError(f"--polarization: {e}") from None
+                columns.update(extra)
+                geometries.update({k: geometry for k in extra})
+                continue
             columns[name] = np.asarray(values, dtype=float)
             geometries[name] = geometry
+        for angle in args.ellipsometry or ():
+            from ._ellipsometry import ellipsometry
+
+            try:
+                e = ellipsometry(stack, wavelength, angle)
+            except LayerstackError as err:
+                raise LayerstackError(f"--ellipsometry {angle:g}: {err}") from None
+            for key, values in ((f"psi_{angle:g}", e.psi_deg), (f"delta_{angle:g}", e.delta_deg)):
+                columns[key] = np.asarray(values, dtype=float)
+                geometries[key] = None
     bad = [name for name, v in columns.items() if not np.all(np.isfinite(v))]
     if bad:
         print(f"{PROG}: warning: non-finite values in column(s) {', '.join(bad)}", file=sys.stderr)

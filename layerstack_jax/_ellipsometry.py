@@ -1,0 +1,168 @@
+r"""Ellipsometry of coherent stacks: :math:`\rho = r_p/r_s = \tan\psi\, e^{i\Delta}`.
+
+An ellipsometer measures the change of polarization state on specular reflection, i.e. the
+ratio of the complex amplitude reflection coefficients of the stack for p and s light,
+
+.. math::
+    \rho(\lambda, \theta_0) = \frac{r_p}{r_s} = \tan\psi\; e^{i\Delta},
+
+with :math:`r_s, r_p` the composite amplitudes :math:`\gamma` of the Rouard recursion
+(Hirayama et al. eqs. 1–4; :func:`layerstack_jax._coherent.packet_amplitudes`).
+
+Conventions (the package's, see :mod:`layerstack_jax._fresnel`)
+-----------------------------------------------------------------
+* Time dependence :math:`e^{-i\omega t}`, index :math:`n + ik` with :math:`k \ge 0`.
+* Amplitudes as in Born & Wolf and ``tmm``: :math:`r_s = (q_i - q_f)/(q_i + q_f)`,
+  :math:`r_p = (n_f^2 q_i - n_i^2 q_f)/(n_f^2 q_i + n_i^2 q_f)`; at normal incidence
+  :math:`r_p = -r_s`, so :math:`\Delta = 180°` there for any stack. For a lossless dielectric
+  substrate :math:`\Delta = 180°` below Brewster's angle and :math:`0°` above it, and
+  :math:`\psi = 45°` at normal incidence, 0 at Brewster's angle (Fujiwara's textbook
+  values).
+* :math:`\psi \in [0°, 90°]`; :math:`\Delta = \arg\rho \in (-180°, 180°]` (a real negative
+  :math:`\rho` gives +180°, never −180°).
+* ``tmm.ellips`` returns :math:`\psi` identical and :math:`\Delta_\text{tmm} = \arg(-\rho)`, i.e.
+  :math:`\Delta_\text{tmm} = \Delta - 180°` (wrapped into (−180°, 180°]).
+* Texts that use :math:`e^{+j\omega t}` with :math:`N = n - jk` (Azzam & Bashara) and the same
+  field-direction conventions obtain the complex conjugate :math:`\bar\rho`, i.e. the same
+  :math:`\psi` and :math:`-\Delta`. Over an absorbing substrate our :math:`\Delta` lies in
+  (−180°, 0°] (their (0°, 180°]); check which one your instrument reports.
+
+For fitting, the wrap-free combinations :math:`N = \cos 2\psi`,
+:math:`C = \sin 2\psi\cos\Delta`, :math:`S = \sin 2\psi \sin\Delta` (what rotating-compensator
+instruments measure; the Mueller matrix of the reflection is
+:math:`m_{00}\,[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`, see
+:mod:`layerstack_jax._polarimetry`) are smooth everywhere, where Δ jumps at ±180°.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+from ._coherent import packet_amplitudes
+from ._custom_types import Array, Complex, Float, RealLike
+from ._stack import ResolvedStack, Stack, resolve
+from ._validate import LayerstackError, is_concrete
+
+__all__ = ["Ellipsometry", "ellipsometry", "reflection_amplitudes", "psi_delta"]
+
+
+class Ellipsometry(NamedTuple):
+    r"""Ellipsometric response, every field shaped ``(*angle, wl)``.
+
+    Attributes:
+        psi_deg: :math:`\psi` in degrees, in [0, 90].
+        delta_deg: :math:`\Delta` in degrees, in (−180, 180] (convention: module docstring).
+        rho: complex :math:`\rho = r_p/r_s = \tan\psi\, e^{i\Delta}`.
+    """
+
+    psi_deg: Float[Array, "*angle wl"]
+    delta_deg: Float[Array, "*angle wl"]
+    rho: Complex[Array, "*angle wl"]
+
+    @property
+    def N(self):
+        r""":math:`\cos 2\psi` (smooth, for fitting)."""
+        return jnp.cos(2 * jnp.deg2rad(self.psi_deg))
+
+    @property
+    def C(self):
+        r""":math:`\sin 2\psi \cos\Delta` (smooth, for fitting)."""
+        return jnp.sin(2 * jnp.deg2rad(self.psi_deg)) * jnp.cos(jnp.deg2rad(self.delta_deg))
+
+    @property
+    def S(self):
+        r""":math:`\sin 2\psi \sin\Delta` (smooth, for fitting)."""
+        return jnp.sin(2 * jnp.deg2rad(self.psi_deg)) * jnp.sin(jnp.deg2rad(self.delta_deg))
+
+
+def _safe_atan2(y, x):
+    """atan2 with a zero (not NaN) gradient at the origin (trap 3: double where)."""
+    origin = (x == 0) & (y == 0)
+    return jnp.where(origin, 0.0, jnp.arctan2(jnp.where(origin, 1.0, y), jnp.where(origin, 1.0, x)))
+
+
+def _safe_abs(z):
+    """|z| with a zero (not NaN) gradient at z = 0."""
+    sq = jnp.real(z) ** 2 + jnp.imag(z) ** 2
+    zero = sq == 0
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
+
+
+def psi_delta(r_s, r_p):
+    r""":math:`(\psi, \Delta)` in radians from the amplitude reflection coefficients.
+
+    :math:`\psi = \operatorname{atan2}(|r_p|, |r_s|)`, :math:`\Delta = \arg(r_p \bar r_s)`; both
+    are NaN-free with finite gradients also at Brewster's angle (:math:`r_p = 0`).
+    """
+    psi = _safe_atan2(_safe_abs(r_p), _safe_abs(r_s))
+    c = r_p * jnp.conj(r_s)
+    delta = _safe_atan2(jnp.imag(c), jnp.real(c))
+    # atan2(-0.0, x < 0) = -pi: a real negative rho must give +pi (range (-pi, pi]).
+    delta = jnp.where(delta <= -jnp.pi, jnp.pi, delta)
+    return psi, delta
+
+
+def _check_coherent(stack: Stack) -> None:
+    for i, layer in enumerate(stack.layers):
+        if not layer.coherent:
+            raise LayerstackError(
+                f"layers[{i}] ({layer.name or 'unnamed'}): ellipsometry needs a fully coherent stack; "
+                "a thick incoherent layer depolarizes (use layerstack_jax.specular_mueller)"
+            )
+
+
+def _check_angle_deg(name: str, angle_deg) -> None:
+    if is_concrete(angle_deg):
+        import numpy as np
+
+        a = np.asarray(angle_deg, dtype=float)
+        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a >= 90):
+            raise LayerstackError(f"{name} must lie in [0, 90) degrees")
+
+
+def _amplitudes_resolved(rs: ResolvedStack, angle_rad):
+    s = jnp.real(rs.n[0]) * jnp.sin(jnp.asarray(angle_rad))[..., None]
+    gamma, _, _ = packet_amplitudes(rs.n, rs.d, s, rs.wavelength)
+    shape = jnp.broadcast_shapes(gamma.shape[1:], jnp.shape(s)[:-1] + (rs.wavelength.shape[-1],))
+    return jnp.broadcast_to(gamma[0], shape), jnp.broadcast_to(gamma[1], shape)
+
+
+def reflection_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
+    r"""Complex amplitude reflection coefficients :math:`(r_s, r_p)` of a coherent stack.
+
+    Args:
+        stack: ambient · coherent films · exit (a :class:`~layerstack_jax.Substrate`, or the
+            binder of a :class:`~layerstack_jax.LambertianBackground`: its specular face).
+        wavelength_nm: ``(wl,)`` vacuum wavelengths, nm.
+        angle_deg: angle of incidence in the ambient, degrees in [0, 90); any shape ``(*angle)``.
+
+    Returns:
+        ``(r_s, r_p)``, complex arrays shaped ``(*angle, wl)`` (module conventions).
+    """
+    _check_coherent(stack)
+    _check_angle_deg("angle_deg", angle_deg)
+    rs = resolve(stack, wavelength_nm)
+    return _amplitudes_resolved(rs, jnp.deg2rad(angle_deg))
+
+
+def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsometry:
+    r"""Ellipsometric angles :math:`\psi, \Delta` and ratio :math:`\rho = r_p/r_s` of a coherent stack.
+
+    A pure, jit-, vmap- and grad-compatible function of the stack's leaves (thicknesses, n, k):
+    differentiate ``psi_deg``, ``delta_deg`` or (better, wrap-free) ``rho``, ``N``, ``C``, ``S``
+    with respect to any of them.
+
+    Args:
+        stack: ambient (real index) · coherent films · exit medium.
+        wavelength_nm: ``(wl,)`` vacuum wavelengths, nm.
+        angle_deg: angle of incidence, degrees in [0, 90); scalar or any shape ``(*angle)``.
+
+    Returns:
+        :class:`Ellipsometry` with fields shaped ``(*angle, wl)``; conventions (Δ range,
+        relation to ``tmm.ellips``) in the module docstring.
+    """
+    r_s, r_p = reflection_amplitudes(stack, wavelength_nm, angle_deg)
+    psi, delta = psi_delta(r_s, r_p)
+    return Ellipsometry(jnp.rad2deg(psi), jnp.rad2deg(delta), r_p / r_s)

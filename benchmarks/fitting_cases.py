@@ -87,7 +87,7 @@ def f2() -> dict:
     t0 = time.perf_counter()
     fitting.fit(obj)
     again = time.perf_counter() - t0
-    h = r.values["thickness[varnish]"].ravel()
+    h = r.values["thickness[varnish]"]
     return {"case": "F2", "what": "joint calibration: 5 samples × 401 λ, α(λ), ρg(λ) on 20 B-splines, 4 free thicknesses",
             "wall_s": first, "converged": f"{'yes' if r.converged else 'NO'} ({r.num_steps} steps)",
             "note": f"compiled re-run {again:.2f} s; reduced χ² {r.reduced_chi2:.3f}; "

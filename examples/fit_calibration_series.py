@@ -45,8 +45,8 @@ def main() -> None:
     truth_file = HERE / "calibration_truth.json"
     if truth_file.exists():
         truth = json.loads(truth_file.read_text())
-        h = result.values["thickness[varnish]"].ravel()
-        e = result.stderr["thickness[varnish]"].ravel()
+        h = result.values["thickness[varnish]"]
+        e = result.stderr["thickness[varnish]"]
         print("\nagainst the synthetic truth (calibration_truth.json):")
         for name, hv, ev, ht in zip(names, h, e, truth["thickness_nm"]):
             print(f"  {name}: fitted {hv:9.1f} ± {ev:6.1f} nm   true {ht:9.1f} nm")

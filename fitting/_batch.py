@@ -168,9 +168,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         cov = cov * red[:, None, None]
     err = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1), 0, None))
     err = np.where((rank < layout.size)[:, None], np.nan, err)
-    names = [p.name for p in layout.params]
-    values = dict(zip(names, layout.split(x)))
-    errors = dict(zip(names, layout.split(err, fill=np.nan)))
+    values = layout.values(x)
+    errors = layout.values(err, fill=np.nan)
     return BatchResult(objective, method, list(layout.names), x, err, values, errors, code == 0, code, steps, chi2,
                        red, rank, scaled, time.perf_counter() - start_time)
 

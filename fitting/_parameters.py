@@ -123,8 +123,10 @@ class Parameter:
 
 
 def _layer_path(layer: LayerRef, *rest) -> tuple:
-    if layer in ("ambient", "exit"):
-        return (layer, *rest)
+    if layer == "ambient":  # the ambient is a material itself, not a layer holding one
+        return ("ambient", *(r for r in rest if r != "index"))
+    if layer == "exit":
+        return ("exit", *rest)
     return ("layers", layer, *rest)
 
 
@@ -231,6 +233,8 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
         path = ("layers", _find_layer(stack, path[1], label), *path[2:])
     elif path[0] not in ("ambient", "exit"):
         raise LayerstackError(f"free parameter {label!r}: path must start with 'layers', 'ambient' or 'exit', got {path!r}")
+    if path[:2] == ("exit", "reflectance") and not isinstance(stack.exit, LambertianBackground):
+        raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
     node = stack
     where = "stack"
     for part in path:
@@ -317,6 +321,14 @@ class ResolvedParameter:
     @property
     def size(self) -> int:
         return self.x0.size
+
+    @property
+    def public_shape(self) -> tuple:
+        """Shape of the value reported to users: ``()`` / ``(samples,)`` for a one-number leaf,
+        else the coefficient shape ``(m,)`` / ``(samples, m)``."""
+        if self.basis is None and self.leaf_shape == ():
+            return self.x0.shape[:-1]
+        return self.x0.shape
 
     def leaf(self, coefficients):
         """Value placed in the stack: ``B c`` for a spectral parameter, else the coefficients
@@ -553,6 +565,12 @@ class Layout:
         for p, a, b in zip(self.params, self.offsets[:-1], self.offsets[1:]):
             out.append(f[..., a:b].reshape(f.shape[:-1] + p.x0.shape))
         return out
+
+    def values(self, x, fill=None) -> dict:
+        """``{name: value}`` in each parameter's public shape (scalars for one-number leaves)."""
+        x = np.asarray(x, dtype=float)
+        return {p.name: np.asarray(c).reshape(x.shape[:-1] + p.public_shape)
+                for p, c in zip(self.params, self.split(x, fill))}
 
     def inject(self, stack: Stack, coefficients: list, sample=None) -> Stack:
         """Put the parameter values (per sample: row ``sample``, or already sliced when

@@ -166,7 +166,7 @@ class FitResult:
                 for idx in np.ndindex(v.shape):
                     lab = "".join(f"[{i}]" for i, n in zip(idx, v.shape) if not (n == 1 and len(v.shape) > 1))
                     value = _fmt(float(v[idx]), float(e[idx]))
-                    if p.fixed[idx]:
+                    if p.fixed.reshape(v.shape)[idx]:
                         value += " (fixed)"
                     lines.append(f"      {lab:<12} {value}")
         lo_all, hi_all, sc = obj.layout.lower, obj.layout.upper, obj.layout.scale
@@ -350,9 +350,9 @@ def build_result(objective: Objective, options, x, steps, code, model, res, pen,
     err = np.where(involved, np.nan, err)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(err, err)
-    values = dict(zip([p.name for p in layout.params], layout.split(x)))
-    stderr = dict(zip([p.name for p in layout.params], layout.split(err, fill=np.nan)))
-    spectra = {p.name: p.spectrum(values[p.name]) for p in layout.params if p.basis is not None}
+    values = layout.values(x)
+    stderr = layout.values(err, fill=np.nan)
+    spectra = {p.name: p.spectrum(c) for p, c in zip(layout.params, layout.split(x)) if p.basis is not None}
     data = [np.asarray(d) for d in args[0]]
     residuals = [np.where(m, mod - d, np.nan) for m, mod, d in zip(objective._mask, model, data)]
     cost = 0.5 * (chi2 + float(np.sum(pen ** 2)))

@@ -151,11 +151,18 @@ def _statistics_function(objective: Objective):
     Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units)."""
     scale = jnp.asarray(objective.layout.scale)
 
-    def stats(x, args):
+    def residuals_and_parts(z, args):
+        data, weight = args
+        x = z * scale
         model = objective.predict(x)
-        res = objective.weighted_residuals(x, args)
+        res = tuple(w * (f - y) for f, y, w in zip(model, data, weight))
         pen = objective.penalty(x)
-        J = jax.jacfwd(lambda z: objective.residuals(z * scale, args))(x / scale)
+        flat = jnp.concatenate([r.ravel() for r in res] + [pen])
+        return flat, (model, res, pen)
+
+    def stats(x, args):
+        # one forward pass shared by the model, the residuals and the Jacobian
+        J, (model, res, pen) = jax.jacfwd(lambda z: residuals_and_parts(z, args), has_aux=True)(x / scale)
         return model, res, pen, J
 
     return stats

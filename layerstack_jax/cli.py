@@ -238,6 +238,7 @@ def _add_fit_parser(sub) -> None:
                    help="standard deviation of every data point (absolute uncertainties); default: scale by reduced chi2")
     p.add_argument("--method", default="lm", choices=("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb"),
                    help="solver (default lm; lbfgsb keeps bounds exactly)")
+    p.add_argument("--columns", metavar="A,B,...", help="fit only these spectrum columns (default: all)")
     p.add_argument("--joint", action="store_true", help="fit all spectra together (calibration series)")
     p.add_argument("--starts", type=_positive_int, default=1, metavar="K", help="multi-start with K starting points")
     p.add_argument("--max-steps", type=_positive_int, default=256, metavar="N", help="solver step limit (default 256)")
@@ -276,6 +277,12 @@ def _cmd_fit(args) -> int:
         stack, declarations = load_fit_stack(args.stack)
         params = _fit_parameters(declarations, args.stack)
         names = list(columns)
+        if args.columns:
+            wanted = [c.strip() for c in args.columns.split(",") if c.strip()]
+            missing = [c for c in wanted if c not in columns]
+            if missing or not wanted:
+                raise LayerstackError(f"{args.data}: no column(s) {missing or args.columns!r}; columns: {', '.join(names)}")
+            names = wanted
         Y = np.stack([columns[n] for n in names])
         own_grid = None if args.wavelengths is None else data_wl
 

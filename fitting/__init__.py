@@ -1,8 +1,57 @@
-"""Inverse problems and coating design on top of :mod:`layerstack_jax`.
+"""Inverse problems on top of :mod:`layerstack_jax`: coating parameters from measured spectra.
 
-Not implemented yet: parameter objects, objectives, optimistix/jaxopt solvers, joint and
-batched fits and design are the subject of the fitting and design issues. Importing this
-package gives nothing but this notice, on purpose.
+Layout after refnx (Parameter → Objective → fitter → results) and optimistix:
+
+* :mod:`fitting._parameters` — :class:`Parameter` (free leaves of a stack, bounds, spectral
+  bases, shared or per sample) and the constructors :func:`thickness`, :func:`alpha`,
+  :func:`rho_g`, :func:`index_n`, :func:`dispersion`; :func:`bspline_basis`;
+* :mod:`fitting._objective` — :class:`Dataset` (spectra of one geometry, σ, mask) and
+  :class:`Objective` (weighted residuals model − data);
+* :mod:`fitting._solve` — :func:`fit` (optimistix Levenberg–Marquardt by default; Gauss–Newton,
+  Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start);
+* :mod:`fitting._results` — :class:`FitResult` (values, standard errors, covariance,
+  identifiability, report, JSON, plot);
+* :mod:`fitting._batch` — :func:`fit_batch` (many independent fits in one compiled, chunked,
+  vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ)).
+
+The forward model is always the public :func:`layerstack_jax.reflectance`; fitting never reaches
+inside it. Units: nm, 1/nm, degrees in geometries, as in :mod:`layerstack_jax`.
 """
 
-__all__: list[str] = []
+from ._batch import BatchResult as BatchResult
+from ._batch import background_rho_g as background_rho_g
+from ._batch import calibration_series as calibration_series
+from ._batch import fit_batch as fit_batch
+from ._objective import Dataset as Dataset
+from ._objective import Objective as Objective
+from ._objective import resample as resample
+from ._parameters import Parameter as Parameter
+from ._parameters import alpha as alpha
+from ._parameters import bspline_basis as bspline_basis
+from ._parameters import dispersion as dispersion
+from ._parameters import index_n as index_n
+from ._parameters import rho_g as rho_g
+from ._parameters import thickness as thickness
+from ._results import FitResult as FitResult
+from ._solve import METHODS as METHODS
+from ._solve import fit as fit
+
+__all__ = [
+    "BatchResult",
+    "background_rho_g",
+    "calibration_series",
+    "fit_batch",
+    "Dataset",
+    "Objective",
+    "resample",
+    "Parameter",
+    "alpha",
+    "bspline_basis",
+    "dispersion",
+    "index_n",
+    "rho_g",
+    "thickness",
+    "FitResult",
+    "METHODS",
+    "fit",
+]

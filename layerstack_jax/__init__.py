@@ -68,9 +68,11 @@ from ._stack import Stack as Stack
 from ._stack import Substrate as Substrate
 from ._stack import TabulatedSpectrum as TabulatedSpectrum
 from ._validate import LayerstackError as LayerstackError
+from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack
 from .io import parse_wavelengths as parse_wavelengths
 from .io import read_csv_columns as read_csv_columns
+from .io import read_spectra_csv as read_spectra_csv
 from .io import save_spectra_csv as save_spectra_csv
 from .io import stack_from_dict as stack_from_dict
 from .io import stack_to_dict as stack_to_dict

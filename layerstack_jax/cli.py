@@ -1,11 +1,12 @@
-"""Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]``.
+"""Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]`` and
+``layerstack fit STACK.toml DATA.csv -g 45/0 -o result.json [--plot fit.png]``.
 
 Runnable as ``layerstack`` (console script) or ``python -m layerstack_jax.cli``. The stack file
 format is described in :mod:`layerstack_jax.io`.
 
 Unlike the library, the command line enables float64 (``jax_enable_x64``) unless ``--float32``
 is given, and restores the previous setting when it returns (so ``main`` can be called
-in-process). Input problems (bad stack file, CSV table, geometry, wavelength grid, unwritable
+in-process). ``fit`` exits with status 1 when a fit did not converge (the report says why). Input problems (bad stack file, CSV table, geometry, wavelength grid, unwritable
 output) print ``layerstack: error: <message>`` to stderr and give exit status 2.
 """
 
@@ -258,14 +259,123 @@ def _cmd_predict(args) -> int:
     return 0
 
 
+# -------------------------------------------------------------------------- fit
+def _add_fit_parser(sub) -> None:
+    p = sub.add_parser(
+        "fit",
+        help="fit the free parameters of a stack to measured spectra",
+        description="Fit the parameters declared free in the stack file (e.g. thickness_nm = { value = 30000, "
+        "free = true, min = 0, max = 1e5 }) to the spectra of a CSV file (wavelength_nm, then one column per "
+        "spectrum). Each spectrum is fitted independently (one compiled solver for all), or all together with "
+        "--joint (parameters with per_sample = true get one value per spectrum, the others are shared). Prints "
+        "the report(s) and writes the results as JSON.",
+    )
+    p.add_argument("stack", metavar="STACK.toml", help="stack file with free parameters")
+    p.add_argument("data", metavar="DATA.csv", help="measured spectra: wavelength_nm, then one column per spectrum")
+    p.add_argument("--geometry", "-g", default="sphere:8:sce", metavar="GEOM",
+                   help="measurement geometry of the spectra (default sphere:8:sce; see `layerstack predict -h`)")
+    p.add_argument("--output", "-o", required=True, metavar="OUT.json", help="JSON results to write")
+    p.add_argument("--plot", metavar="OUT.png", help="also plot data vs fit with residuals (PNG)")
+    p.add_argument("--wavelengths", "-w", metavar="GRID",
+                   help="model grid (default: the data's wavelengths); data are resampled onto it, never extrapolated")
+    p.add_argument("--sigma", type=float, metavar="S",
+                   help="standard deviation of every data point (absolute uncertainties); default: scale by reduced chi2")
+    p.add_argument("--method", default="lm", choices=("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb"),
+                   help="solver (default lm; lbfgsb keeps bounds exactly)")
+    p.add_argument("--columns", metavar="A,B,...", help="fit only these spectrum columns (default: all)")
+    p.add_argument("--joint", action="store_true", help="fit all spectra together (calibration series)")
+    p.add_argument("--starts", type=_positive_int, default=1, metavar="K", help="multi-start with K starting points")
+    p.add_argument("--max-steps", type=_positive_int, default=256, metavar="N", help="solver step limit (default 256)")
+    p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
+    p.add_argument("--nodes", type=_positive_int, default=DEFAULT_NODES, metavar="N",
+                   help=f"Gauss-Legendre nodes per angular segment for diffuse integrals (default {DEFAULT_NODES})")
+    p.set_defaults(func=_cmd_fit)
+
+
+def _fit_parameters(declarations: list, source: str) -> list:
+    import fitting
+
+    params = []
+    for d in declarations:
+        params.append(fitting.Parameter(
+            tuple(d["path"]), d["kind"], d["name"], None, d["lower"], d["upper"], d["basis"], d["per_sample"],
+            d["smoothness"],
+        ))
+    if not params:
+        raise LayerstackError(f"{source}: no free parameter: mark some with e.g. thickness_nm = {{ value = 30000, free = true }}")
+    return params
+
+
+def _cmd_fit(args) -> int:
+    import json
+
+    from .io import load_fit_stack, read_spectra_csv
+
+    start = time.perf_counter()
+    geometry = parse_geometry(args.geometry)
+    data_wl, columns = read_spectra_csv(args.data)
+    grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
+    with _precision(args.float32):
+        import fitting
+
+        stack, declarations = load_fit_stack(args.stack)
+        params = _fit_parameters(declarations, args.stack)
+        names = list(columns)
+        if args.columns:
+            wanted = [c.strip() for c in args.columns.split(",") if c.strip()]
+            missing = [c for c in wanted if c not in columns]
+            if missing or not wanted:
+                raise LayerstackError(f"{args.data}: no column(s) {missing or args.columns!r}; columns: {', '.join(names)}")
+            names = wanted
+        Y = np.stack([columns[n] for n in names])
+        own_grid = None if args.wavelengths is None else data_wl
+
+        def objective(rows):
+            ds = fitting.Dataset(geometry, rows, sigma=args.sigma, wavelength_nm=own_grid, name=Path(args.data).name)
+            try:
+                return fitting.Objective(stack, grid, ds, params, n_samples=rows.shape[0], nodes=args.nodes)
+            except LayerstackError as e:
+                raise LayerstackError(f"{args.data}: {e}") from None
+
+        results = []
+        if args.joint:
+            obj = objective(Y)
+            results.append(("+".join(names), fitting.fit(obj, args.method, starts=args.starts, max_steps=args.max_steps)))
+        else:
+            if any(p.per_sample for p in params):
+                raise LayerstackError(f"{args.stack}: per_sample parameters need --joint")
+            obj = objective(Y[:1])
+            for name, y in zip(names, Y):
+                data = [y[None]] if own_grid is None else [fitting.resample(own_grid, y, grid, what=f"column {name!r}")[None]]
+                results.append((name, fitting.fit(obj, args.method, data=data, starts=args.starts,
+                                                  max_steps=args.max_steps)))
+    for name, r in results:
+        print(f"\n### {name}\n{r.report()}")
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    payload = {
+        "stack": str(args.stack),
+        "data": str(args.data),
+        "geometry": args.geometry,
+        "joint": bool(args.joint),
+        "fits": [{"spectrum": name, **r.to_dict()} for name, r in results],
+    }
+    out.write_text(json.dumps(payload, indent=1))
+    n_ok = sum(r.converged for _, r in results)
+    print(f"{PROG}: wrote {out} ({len(results)} fit(s), {n_ok} converged) in {time.perf_counter() - start:.1f} s")
+    if args.plot:
+        plot = Path(args.plot)
+        results[0][1].plot(plot, title=Path(args.stack).name)
+        print(f"{PROG}: wrote {plot} (data vs fit{' of ' + results[0][0] if len(results) > 1 else ''})")
+    return 0 if n_ok == len(results) else 1
+
+
 # ============================================================== more subcommands
-# `fit` (adjust stack parameters to measured spectra) and `design` (optimise a stack towards a
-# target) go here: write `_add_fit_parser(sub)` / `_cmd_fit(args)` (and the same for design)
-# like the predict pair above, reuse `_precision`, `_parse_geometries`, `load_stack`,
-# `parse_wavelengths` and `save_spectra_csv`, and add the parser builders to _SUBCOMMANDS.
+# `design` (optimise a stack towards a target) goes here: write `_add_design_parser(sub)` /
+# `_cmd_design(args)` like the predict and fit pairs above, and add the builder to _SUBCOMMANDS.
 # ================================================================================
 
-_SUBCOMMANDS = (_add_predict_parser,)  # later: _add_fit_parser, _add_design_parser
+_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser)  # later: _add_design_parser
 
 
 def _build_parser() -> argparse.ArgumentParser:

@@ -32,6 +32,20 @@ memory, :func:`stack_from_dict`). Layers are listed from the side the light come
                               # (columns wavelength_nm, rho_g) or inline
                               # { wavelength_nm = [...], values = [...] }
 
+Free parameters (for ``layerstack fit``): a layer's ``thickness_nm``, ``alpha_per_nm``, ``n`` and
+``k`` (numbers) and the background's ``rho_g`` may be written as an inline table that adds
+fitting information to the value::
+
+    thickness_nm = { value = 30000, free = true, min = 0, max = 1e5 }
+    alpha_per_nm = { table = "alpha.csv", free = true, basis = 8 }   # spectrum on 8 B-splines
+    rho_g = { value = 0.5, free = true, basis = "free" }              # one value per wavelength
+
+Keys: ``value`` (or, for spectra, ``table`` / ``wavelength_nm`` + ``values``), ``free`` (bool),
+``min``/``max`` (bounds; defaults thickness ≥ 0, α ≥ 0, 0 ≤ ρg ≤ 1, n ≥ 1), ``basis`` (spectra:
+number of B-spline functions or ``"free"``), ``per_sample`` (``layerstack fit --joint``: one value
+per spectrum) and ``smoothness`` (penalty weight). :func:`load_stack` ignores these keys (the
+value is used); :func:`load_fit_stack` also returns the declarations.
+
 Dispersion: wherever ``n`` is accepted it may also be an inline table with exactly one of
 
 * ``n = { cauchy = [A, B, C] }`` — :math:`n = A + B/\lambda^2 + C/\lambda^4`, λ in µm
@@ -82,9 +96,11 @@ from ._validate import LayerstackError, is_concrete
 
 __all__ = [
     "load_stack",
+    "load_fit_stack",
     "stack_from_dict",
     "stack_to_dict",
     "read_csv_columns",
+    "read_spectra_csv",
     "save_spectra_csv",
     "parse_wavelengths",
 ]
@@ -228,6 +244,57 @@ def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()
         raise LayerstackError(f"{path}: no data rows after the header")
     data = np.asarray(rows, dtype=float)
     return {name: data[:, j] for j, name in enumerate(names)}
+
+
+def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Read measured spectra: a header row ``wavelength_nm, name1, name2, …`` then numbers.
+
+    Returns ``(wavelength_nm, {name: values})``. Lines starting with ``#`` (e.g. a note that the
+    data are synthetic) and blank lines are skipped. Raises :class:`LayerstackError` naming the
+    file and line for a missing ``wavelength_nm`` column, no spectrum column, a duplicate name,
+    a short or non-numeric row, NaN, or wavelengths that do not increase strictly.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read: {e}") from None
+    lines = [(i + 1, line.strip()) for i, line in enumerate(text.splitlines())]
+    lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
+    if not lines:
+        raise LayerstackError(f"{path}: empty file (expected a header wavelength_nm,<spectrum names…> and data rows)")
+    header_line, header = lines[0]
+    names = [h.strip() for h in header.split(",")]
+    if not names or names[0].lower() != "wavelength_nm":
+        raise LayerstackError(f"{path}: line {header_line}: the first column must be wavelength_nm, got {names[0]!r}")
+    if len(names) < 2:
+        raise LayerstackError(f"{path}: line {header_line}: no spectrum column after wavelength_nm")
+    for n in names[1:]:
+        if not n:
+            raise LayerstackError(f"{path}: line {header_line}: empty column name")
+        if names.count(n) > 1:
+            raise LayerstackError(f"{path}: line {header_line}: column {n!r} appears twice")
+    rows = []
+    for line_no, line in lines[1:]:
+        fields = [f.strip() for f in line.split(",")]
+        if len(fields) != len(names):
+            raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns")
+        try:
+            row = [float(f) for f in fields]
+        except ValueError:
+            raise LayerstackError(f"{path}: line {line_no}: not a number in {line!r}") from None
+        if not all(math.isfinite(v) for v in row):
+            raise LayerstackError(f"{path}: line {line_no}: NaN or infinite value in {line!r}")
+        rows.append(row)
+    if not rows:
+        raise LayerstackError(f"{path}: no data rows after the header")
+    data = np.asarray(rows, dtype=float)
+    wl = data[:, 0]
+    if np.any(wl <= 0) or np.any(np.diff(wl) <= 0):
+        raise LayerstackError(f"{path}: wavelength_nm must be > 0 and increase strictly")
+    return wl, {n: data[:, j + 1] for j, n in enumerate(names[1:])}
 
 
 def _read_table(where: _Where, key: str, base_dir: Path, filename, required, optional=()) -> tuple[Path, dict]:
@@ -374,11 +441,71 @@ def _spectrum(where: _Where, key: str, spec, base_dir: Path, column: str, label:
     return TabulatedSpectrum(wl, values, name=name)
 
 
-def _layer(where: _Where, table: Mapping, base_dir: Path, name: str) -> Layer:
+_FREE_KEYS = ("value", "free", "min", "max", "basis", "per_sample", "smoothness")
+
+
+def _split_free(where: _Where, key: str, spec, path: tuple, kind: str, free: Optional[list], *, spectral: bool):
+    """Strip the free-parameter keys of ``spec`` (module docstring), record the declaration in
+    ``free`` (when a list) and return the plain value spec."""
+    if not isinstance(spec, dict) or not any(k in spec for k in _FREE_KEYS):
+        return spec
+    decl = {k: spec[k] for k in _FREE_KEYS if k in spec}
+    rest = {k: v for k, v in spec.items() if k not in _FREE_KEYS}
+    if "value" in decl:
+        if rest:
+            raise where.error(f"give either value = ... or {', '.join(rest)}, not both", key)
+        plain = decl.pop("value")
+        if not _is_number(plain):
+            raise where.error(f"value must be a number, got {plain!r}", key)
+    elif rest and spectral:
+        plain = rest
+    else:
+        raise where.error("missing value = <number> next to free/min/max", key)
+    is_free = decl.get("free", False)
+    if not isinstance(is_free, bool):
+        raise where.error(f"free must be true or false, got {is_free!r}", key)
+    bounds = {}
+    for b in ("min", "max"):
+        if b in decl:
+            v = decl[b]
+            if not _is_number(v) or math.isnan(float(v)):
+                raise where.error(f"{b} must be a number, got {v!r}", key)
+            bounds[b] = float(v)
+    if "min" in bounds and "max" in bounds and not bounds["min"] < bounds["max"]:
+        raise where.error(f"bounds inverted: min {bounds['min']:g} must be < max {bounds['max']:g}", key)
+    basis = decl.get("basis")
+    if basis is not None:
+        if not spectral:
+            raise where.error("basis is for spectra (alpha_per_nm, rho_g) only", key)
+        if not (basis == "free" or (isinstance(basis, int) and not isinstance(basis, bool) and basis >= 1)):
+            raise where.error(f"basis must be a number of B-spline functions >= 1 or \"free\", got {basis!r}", key)
+    per_sample = decl.get("per_sample", False)
+    if not isinstance(per_sample, bool):
+        raise where.error(f"per_sample must be true or false, got {per_sample!r}", key)
+    smooth = decl.get("smoothness", 0.0)
+    if not _is_number(smooth) or smooth < 0:
+        raise where.error(f"smoothness must be a number >= 0, got {smooth!r}", key)
+    extra = [k for k in ("min", "max", "basis", "per_sample", "smoothness") if k in decl]
+    if extra and not is_free:
+        raise where.error(f"{', '.join(extra)} given but free is not true", key)
+    if is_free and free is not None:
+        free.append({"path": path, "kind": kind, "name": f"{key}[{path[1]}]" if path[0] == "layers" else key,
+                     "lower": bounds.get("min"), "upper": bounds.get("max"), "basis": basis,
+                     "per_sample": per_sample, "smoothness": float(smooth), "where": f"{where.source}: {where.table}"})
+    return plain
+
+
+def _layer(where: _Where, table: Mapping, base_dir: Path, name: str, index: int = 0, free: Optional[list] = None) -> Layer:
     _reject_unknown(where, table, _LAYER_KEYS)
     if "thickness_nm" not in table:
         raise where.error("missing (layer thickness in nm)", "thickness_nm")
-    thickness = _number(where, "thickness_nm", table["thickness_nm"], minimum=0.0, what="nm")
+    table = dict(table)
+    spec = _split_free(where, "thickness_nm", table["thickness_nm"], ("layers", name, "thickness"), "thickness", free,
+                       spectral=False)
+    thickness = _number(where, "thickness_nm", spec, minimum=0.0, what="nm")
+    for key, field, kind in (("n", "n", "n"), ("k", "k", "coefficient")):
+        if key in table and isinstance(table[key], dict) and any(k in table[key] for k in _FREE_KEYS):
+            table[key] = _split_free(where, key, table[key], ("layers", name, "index", field), kind, free, spectral=False)
     if "coherent" not in table:
         raise where.error(
             "missing: say coherent = true for a thin film (interference) or false for a thick layer "
@@ -396,19 +523,24 @@ def _layer(where: _Where, table: Mapping, base_dir: Path, name: str) -> Layer:
                 "is only for incoherent layers (coherent = false); give a coherent film an extinction coefficient k",
                 "alpha_per_nm",
             )
-        alpha = _spectrum(where, "alpha_per_nm", table["alpha_per_nm"], base_dir, "alpha_per_nm",
+        spec = _split_free(where, "alpha_per_nm", table["alpha_per_nm"], ("layers", name, "alpha"), "alpha", free,
+                           spectral=True)
+        alpha = _spectrum(where, "alpha_per_nm", spec, base_dir, "alpha_per_nm",
                           f"layer {name!r} alpha", lo=0.0, hi=None)
     return Layer(index, thickness, coherent=coherent, alpha=alpha, name=name)
 
 
 # ------------------------------------------------------------------------------ stacks
-def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>") -> Stack:
+def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", free: Optional[list] = None) -> Stack:
     """Build a :class:`Stack` from the parsed contents of a stack file (schema: module docstring).
 
     Args:
         d: the dict (as from ``tomllib``).
         base_dir: directory against which relative table file names are resolved.
         source: name used in error messages (the file name when called by :func:`load_stack`).
+        free: if a list, the free-parameter declarations found are appended to it (dicts with
+            ``path``, ``kind``, ``name``, ``lower``, ``upper``, ``basis``, ``per_sample``,
+            ``smoothness``); layers are named in the paths.
     """
     base_dir = Path(base_dir)
     top = _Where(source, "top level")
@@ -442,7 +574,7 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>") -
             label = f"[[layers]] no. {i + 1}"
             if not isinstance(name, str) or not name:
                 raise _Where(source, label).error(f"must be a non-empty string, got {name!r}", "name")
-            layers.append(_layer(_Where(source, f"{label} ({name!r})"), t, base_dir, name))
+            layers.append(_layer(_Where(source, f"{label} ({name!r})"), t, base_dir, name, i, free))
 
         has_sub, has_bg = "substrate" in d, "background" in d
         if has_sub and has_bg:
@@ -461,7 +593,8 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>") -
             index = _material(where, bg, base_dir, allow_k=False, label="background n")
             if "rho_g" not in bg:
                 raise where.error("missing (intrinsic reflectance of the background, in [0, 1])", "rho_g")
-            rho = _spectrum(where, "rho_g", bg["rho_g"], base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
+            spec = _split_free(where, "rho_g", bg["rho_g"], ("exit", "reflectance"), "rho_g", free, spectral=True)
+            rho = _spectrum(where, "rho_g", spec, base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
             exit_ = LambertianBackground(index, rho)
         return Stack(ambient=ambient, layers=layers, exit=exit_)
     except LayerstackError as e:
@@ -469,6 +602,29 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>") -
         if msg.startswith(f"{source}:"):
             raise
         raise LayerstackError(f"{source}: {msg}") from None
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: stack file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise LayerstackError(f"{path}: invalid TOML: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read stack file: {e}") from None
+
+
+def load_fit_stack(path) -> tuple[Stack, list]:
+    """Read a stack file and its free-parameter declarations (module docstring, "Free
+    parameters"): returns ``(stack, declarations)``, each declaration a dict with ``path``
+    (layers by name), ``kind``, ``name``, ``lower``, ``upper`` (None: default), ``basis``,
+    ``per_sample``, ``smoothness``."""
+    path = Path(path)
+    free: list = []
+    stack = stack_from_dict(_read_toml(path), path.parent, source=str(path), free=free)
+    return stack, free
 
 
 def load_stack(path) -> Stack:

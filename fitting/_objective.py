@@ -1,0 +1,335 @@
+r"""Measurements and the residual function of a fit.
+
+A :class:`Dataset` is what one instrument geometry read on every sample of the fit:
+``data`` shaped ``(samples, wl)`` on the model wavelength grid (or on its own grid, then
+resampled linearly onto the model grid — which must lie inside the data's range: nothing is
+extrapolated), with optional per-point standard deviations σ (or weights) and a mask of valid
+points. An :class:`Objective` joins a template :class:`~layerstack_jax.Stack`, the model grid,
+the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T …).
+
+Residuals (model − data, weighted): for each dataset,
+:math:`r = m\,w\,(f(\lambda; x) - y)` with :math:`w = 1/\sigma` (or the given weights, default 1)
+and :math:`m \in \{0, 1\}` the mask, flattened and concatenated over datasets, followed by the
+smoothness penalties :math:`\sqrt{\mu}\,\Delta^2 (B c)` of spectral parameters. The model
+:math:`f` is the public forward function :func:`layerstack_jax.reflectance` applied to the
+template stack with the parameters put in by ``equinox.tree_at`` — one stack per sample, vmapped.
+
+The data, σ and mask travel as a pytree argument (:meth:`Objective.args`) of the pure residual
+function (:meth:`Objective.residuals`), so a second fit of the same objective with other data
+reuses the compiled solver.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from layerstack_jax import DEFAULT_NODES, Geometry, LayerstackError, Stack, reflectance
+from layerstack_jax._geometry import BRDF, Directional, Specular, Sphere
+
+from ._parameters import Layout, Parameter, resolve_parameter
+
+__all__ = ["Dataset", "Objective", "resample"]
+
+
+def _geometry_label(g: Geometry) -> str:
+    if isinstance(g, Sphere):
+        return f"sphere:{float(g.incidence_deg):g}:{'sce' if g.specular == 'excluded' else 'sci'}"
+    if isinstance(g, BRDF):
+        return f"brdf:{float(g.incidence_deg):g}:{float(g.viewing_deg):g}"
+    if isinstance(g, Directional):
+        return f"{float(g.incidence_deg):g}/{float(g.viewing_deg):g}"
+    if isinstance(g, Specular):
+        return f"specular:{float(g.angle_deg):g}:{g.quantity}"
+    return type(g).__name__
+
+
+def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarray:
+    """Linear interpolation of ``values`` (``(..., n)`` on ``wavelength_nm``) onto ``grid_nm``.
+
+    Raises :class:`LayerstackError` when the grid reaches outside the data's range (no
+    extrapolation) or the data wavelengths do not increase strictly.
+    """
+    w = np.asarray(wavelength_nm, dtype=float)
+    g = np.asarray(grid_nm, dtype=float)
+    v = np.asarray(values, dtype=float)
+    if w.ndim != 1 or w.size < 1 or v.shape[-1] != w.size:
+        raise LayerstackError(f"{what}: {v.shape[-1]} values for {w.size} wavelengths")
+    if w.size > 1 and np.any(np.diff(w) <= 0):
+        raise LayerstackError(f"{what}: wavelengths must increase strictly")
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(g))))
+    if g.min() < w[0] - tol or g.max() > w[-1] + tol:
+        raise LayerstackError(
+            f"{what}: the data cover {w[0]:g}–{w[-1]:g} nm but the model grid spans {g.min():g}–{g.max():g} nm; "
+            "data are never extrapolated: narrow the model grid or mask the missing points"
+        )
+    if w.size == g.size and np.allclose(w, g, rtol=0, atol=tol):
+        return v.copy()
+    flat = v.reshape(-1, w.size)
+    return np.stack([np.interp(g, w, row) for row in flat]).reshape(v.shape[:-1] + g.shape)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Dataset:
+    """Spectra measured in one geometry, one row per sample.
+
+    Attributes:
+        geometry: a :class:`~layerstack_jax.Geometry` (``Sphere``, ``Directional`` …) — what
+            :func:`layerstack_jax.reflectance` computes is compared with ``data``.
+        data: ``(samples, wl)`` or ``(wl,)`` (one sample); NaN allowed only where masked.
+        sigma: standard deviation of each point (scalar, ``(wl,)`` or ``(samples, wl)``);
+            covariances are then absolute (not rescaled by χ²).
+        weights: alternative to σ: residual weights (σ = 1/weight up to a common factor);
+            covariances are rescaled by the reduced χ².
+        mask: boolean, True where the point is used (default: all).
+        wavelength_nm: the data's own wavelengths if they differ from the model grid
+            (resampled linearly; the model grid must lie inside).
+        name: label in reports.
+    """
+
+    geometry: Geometry
+    data: object
+    sigma: object = None
+    weights: object = None
+    mask: object = None
+    wavelength_nm: object = None
+    name: str = ""
+
+    @property
+    def label(self) -> str:
+        return self.name or _geometry_label(self.geometry)
+
+
+def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int):
+    """Checked ``(data, weight, mask)`` arrays shaped ``(samples, wl)`` on the model grid."""
+    label = f"dataset {index} ({ds.label})"
+    if not isinstance(ds.geometry, Geometry):
+        raise LayerstackError(f"{label}: geometry must be a layerstack_jax Geometry, got {ds.geometry!r}")
+    y = np.asarray(ds.data, dtype=float)
+    if y.ndim == 1:
+        y = y[None]
+    if y.ndim != 2:
+        raise LayerstackError(f"{label}: data must be shaped (samples, wavelengths), got {y.shape}")
+    wl_data = grid if ds.wavelength_nm is None else np.asarray(ds.wavelength_nm, dtype=float)
+    if y.shape[1] != wl_data.size:
+        raise LayerstackError(
+            f"{label}: data have {y.shape[1]} points per spectrum but "
+            + ("the model grid has" if ds.wavelength_nm is None else "wavelength_nm has")
+            + f" {wl_data.size}"
+        )
+
+    def per_point(v, what, default):
+        a = np.broadcast_to(np.asarray(default if v is None else v, dtype=float), y.shape) if v is None or np.ndim(v) == 0 \
+            else np.asarray(v, dtype=float)
+        if a.ndim == 1:
+            a = a[None]
+        try:
+            return np.broadcast_to(a, y.shape).astype(float)
+        except ValueError:
+            raise LayerstackError(f"{label}: {what} shaped {np.shape(v)} does not match data {y.shape}") from None
+
+    if ds.sigma is not None and ds.weights is not None:
+        raise LayerstackError(f"{label}: give sigma or weights, not both")
+    if ds.mask is None:
+        mask = np.ones(y.shape, bool)
+    else:
+        m = np.asarray(ds.mask)
+        if m.dtype != bool:
+            raise LayerstackError(f"{label}: mask must be boolean (True = point used)")
+        mask = np.broadcast_to(m[None] if m.ndim == 1 else m, y.shape).copy()
+    if ds.sigma is not None:
+        sigma = per_point(ds.sigma, "sigma", 1.0)
+        bad = mask & ~(np.isfinite(sigma) & (sigma > 0))
+        if np.any(bad):
+            raise LayerstackError(f"{label}: sigma must be finite and > 0 at every used point")
+        weight = 1.0 / np.where(sigma > 0, sigma, 1.0)
+    else:
+        weight = per_point(ds.weights, "weights", 1.0)
+        if np.any(mask & ~(np.isfinite(weight) & (weight >= 0))):
+            raise LayerstackError(f"{label}: weights must be finite and >= 0")
+    # values checks at used points
+    used = mask
+    nan = used & ~np.isfinite(y)
+    if np.any(nan):
+        s, j = np.argwhere(nan)[0]
+        raise LayerstackError(
+            f"{label}: NaN or infinite data at sample {s}, {wl_data[j]:g} nm; mask missing points (mask=False)"
+        )
+    neg = used & (y < 0)
+    if np.any(neg):
+        s, j = np.argwhere(neg)[0]
+        raise LayerstackError(
+            f"{label}: negative reflectance {y[s, j]:g} at sample {s}, {wl_data[j]:g} nm (data must be >= 0)"
+        )
+    if ds.wavelength_nm is not None:
+        y = resample(wl_data, np.where(mask, y, 0.0), grid, what=label)
+        weight = resample(wl_data, weight, grid, what=label)
+        # a model point is used only if both neighbouring data points are
+        m = resample(wl_data, mask.astype(float), grid, what=label)
+        mask = m > 1 - 1e-12
+    if n_samples is not None and y.shape[0] != n_samples:
+        raise LayerstackError(f"{label}: {y.shape[0]} spectra for {n_samples} samples")
+    y = np.where(mask, y, 0.0)
+    return y, np.where(mask, weight, 0.0), mask
+
+
+class Objective:
+    """Model + data + free parameters: the residual function of a fit (module docstring).
+
+    Args:
+        stack: template stack (structure and fixed values; free leaves give the starting values).
+        wavelength_nm: model grid in nm, ``(wl,)``.
+        datasets: one :class:`Dataset` or a sequence (joint fit over geometries / quantities).
+        parameters: the free :class:`Parameter` s (constructors :func:`~fitting.thickness`,
+            :func:`~fitting.alpha`, :func:`~fitting.rho_g` …).
+        n_samples: number of samples (rows of every dataset); default from the first dataset.
+        nodes: quadrature nodes per segment of the diffuse integrals.
+    """
+
+    def __init__(self, stack: Stack, wavelength_nm, datasets, parameters: Sequence[Parameter], *,
+                 n_samples: Optional[int] = None, nodes: int = DEFAULT_NODES):
+        if not isinstance(stack, Stack):
+            raise LayerstackError(f"stack must be a layerstack_jax.Stack, got {type(stack).__name__}")
+        grid = np.asarray(wavelength_nm, dtype=float)
+        if grid.ndim != 1 or grid.size < 1 or np.any(~np.isfinite(grid)) or np.any(grid <= 0):
+            raise LayerstackError("wavelength_nm: the model grid must be a 1-D array of finite wavelengths > 0 nm")
+        if grid.size > 1 and np.any(np.diff(grid) <= 0):
+            raise LayerstackError("wavelength_nm: the model grid must increase strictly")
+        if isinstance(datasets, Dataset):
+            datasets = [datasets]
+        datasets = list(datasets)
+        if not datasets:
+            raise LayerstackError("an objective needs at least one Dataset")
+        for p in parameters:
+            if not isinstance(p, Parameter):
+                raise LayerstackError(f"parameters must be fitting.Parameter objects, got {p!r}")
+        if n_samples is None:
+            d0 = np.asarray(datasets[0].data)
+            n_samples = 1 if d0.ndim == 1 else d0.shape[0]
+        prepared = [_prepare(ds, grid, n_samples, i) for i, ds in enumerate(datasets)]
+        self.stack = stack
+        self.wavelength = grid
+        self.datasets = tuple(datasets)
+        self.n_samples = int(n_samples)
+        self.nodes = int(nodes)
+        self.layout = Layout([resolve_parameter(p, stack, grid, self.n_samples) for p in parameters], self.n_samples)
+        self._data = tuple(jnp.asarray(y) for y, _, _ in prepared)
+        self._weight = tuple(jnp.asarray(w) for _, w, _ in prepared)
+        self._mask = tuple(np.asarray(m) for _, _, m in prepared)
+        self.sigma_given = all(ds.sigma is not None for ds in datasets)
+        self.n_points = int(sum(m.sum() for m in self._mask))
+        # check once, eagerly, that the forward model runs on the grid (tables cover it, …)
+        try:  # traced once, not run: static checks (tables cover the grid, shapes) happen at trace time
+            jax.eval_shape(self.predict, jnp.asarray(self.layout.x0))
+        except LayerstackError as e:
+            raise LayerstackError(f"model at the starting values: {e}") from None
+
+    # ----------------------------------------------------------------- data
+    def args(self, data=None):
+        """The data pytree passed to :meth:`residuals`: ``(data, weight)`` per dataset.
+
+        ``data``: optional replacement spectra, a sequence (one ``(samples, wl)`` array per
+        dataset) — checked like the originals, with the same σ/weights and mask.
+        """
+        if data is None:
+            return (self._data, self._weight)
+        if not isinstance(data, (list, tuple)) or len(data) != len(self.datasets):
+            raise LayerstackError(f"data: give one array per dataset ({len(self.datasets)})")
+        ys = []
+        for i, (ds, y) in enumerate(zip(self.datasets, data)):
+            new = dataclasses.replace(ds, data=y, mask=self._mask[i] if ds.wavelength_nm is None else ds.mask)
+            ys.append(jnp.asarray(_prepare(new, self.wavelength, self.n_samples, i)[0]))
+        return (tuple(ys), self._weight)
+
+    def batch_args(self, data):
+        """Args for many independent fits: ``data`` is one array per dataset shaped
+        ``(N, samples, wl)`` (or ``(N, wl)`` for one sample); checked in bulk like
+        :meth:`args`. Returns ``(data, weight)`` with a leading axis N on every array."""
+        if not isinstance(data, (list, tuple)):
+            data = [data]
+        if len(data) != len(self.datasets):
+            raise LayerstackError(f"data: give one array per dataset ({len(self.datasets)})")
+        ys, ws, n = [], [], None
+        for i, (ds, y) in enumerate(zip(self.datasets, data)):
+            y = np.asarray(y, dtype=float)
+            if y.ndim == 2 and self.n_samples == 1:
+                y = y[:, None, :]
+            if y.ndim != 3 or y.shape[1] != self.n_samples:
+                raise LayerstackError(
+                    f"dataset {i} ({ds.label}): batch data must be shaped (N, {self.n_samples}, wl), got {y.shape}"
+                )
+            if n is None:
+                n = y.shape[0]
+            elif y.shape[0] != n:
+                raise LayerstackError(f"dataset {i} ({ds.label}): {y.shape[0]} fits, dataset 0 has {n}")
+            mask = self._mask[i] if ds.wavelength_nm is None else ds.mask
+            mask_n = None if mask is None else np.broadcast_to(np.asarray(mask), y.shape[1:])
+            flat = dataclasses.replace(
+                ds, data=y.reshape(-1, y.shape[-1]),
+                mask=None if mask_n is None else np.tile(mask_n, (n, 1)),
+                sigma=None if ds.sigma is None or np.ndim(ds.sigma) < 2 else np.tile(np.asarray(ds.sigma, float), (n, 1)),
+                weights=None if ds.weights is None or np.ndim(ds.weights) < 2
+                else np.tile(np.asarray(ds.weights, float), (n, 1)),
+            )
+            if ds.sigma is not None and np.ndim(ds.sigma) < 2:
+                flat = dataclasses.replace(flat, sigma=ds.sigma)
+            if ds.weights is not None and np.ndim(ds.weights) < 2:
+                flat = dataclasses.replace(flat, weights=ds.weights)
+            yy, _, _ = _prepare(flat, self.wavelength, None, i)
+            ys.append(jnp.asarray(yy.reshape(n, self.n_samples, -1)))
+            ws.append(jnp.broadcast_to(self._weight[i], (n,) + self._weight[i].shape))
+        return (tuple(ys), tuple(ws)), n
+
+    def stack_for(self, x, sample: int = 0) -> Stack:
+        """The template stack with the parameters ``x`` put in, for ``sample``."""
+        return self.layout.inject(self.stack, self.layout.split(jnp.asarray(x)), sample)
+
+    def predict(self, x) -> tuple:
+        """Model spectra for physical parameters ``x``: one ``(samples, wl)`` array per dataset."""
+        coefficients = self.layout.split(x)
+        per = [p.per_sample for p in self.layout.params]
+        shared = [None if ps else c for c, ps in zip(coefficients, per)]
+        own = [c if ps else None for c, ps in zip(coefficients, per)]
+        grid = self.wavelength
+        geometries = [ds.geometry for ds in self.datasets]
+        nodes = self.nodes
+
+        def one(own_s):
+            cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
+            st = self.layout.inject(self.stack, cs, None)
+            return tuple(reflectance(st, grid, g, nodes=nodes) for g in geometries)
+
+        if any(per):
+            out = jax.vmap(one)(own)
+        else:
+            single = one(own)
+            out = tuple(jnp.broadcast_to(v, (self.n_samples,) + v.shape[-1:]) for v in single)
+        return tuple(jnp.reshape(v, (self.n_samples, grid.size)) for v in out)
+
+    def penalty(self, x):
+        """Smoothness residuals :math:`\\sqrt{\\mu}\\,\\Delta^2 (B c)` of spectral parameters."""
+        out = []
+        for p, c in zip(self.layout.params, self.layout.split(x)):
+            mu = p.parameter.smoothness
+            if mu > 0 and p.basis is not None and p.basis.shape[0] > 2:
+                v = c @ jnp.asarray(p.basis).T
+                out.append((jnp.sqrt(mu) * (v[..., 2:] - 2 * v[..., 1:-1] + v[..., :-2])).ravel())
+        return jnp.concatenate(out) if out else jnp.zeros((0,), dtype=x.dtype)
+
+    def weighted_residuals(self, x, args):
+        """Data residuals ``w (f − y)`` per dataset, ``(samples, wl)`` each (0 at masked points)."""
+        data, weight = args
+        return tuple(w * (f - y) for f, y, w in zip(self.predict(x), data, weight))
+
+    def residuals(self, x, args):
+        """Flat residual vector: weighted data residuals, then smoothness penalties."""
+        parts = [r.ravel() for r in self.weighted_residuals(x, args)]
+        return jnp.concatenate(parts + [self.penalty(x)])
+
+    @property
+    def n_parameters(self) -> int:
+        return self.layout.size

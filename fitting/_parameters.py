@@ -1,0 +1,591 @@
+r"""Free parameters of a stack: where they sit in the :class:`~layerstack_jax.Stack` pytree,
+their bounds, their spectral basis, and how they are packed into one flat vector.
+
+A :class:`Parameter` names one numeric leaf of the stack by its *path*, e.g.
+``("layers", "varnish", "thickness")`` or ``("exit", "reflectance")``; layers may be given by
+position or by name. Its value is a vector of *coefficients* :math:`c` (one number for a
+scalar leaf). A spectral leaf (α(λ), ρg(λ), n(λ)) is :math:`v = B c` on the model wavelength grid,
+with ``B`` of shape ``(wl, m)``: the identity (``basis="free"``: one free value per wavelength),
+a clamped B-spline basis of ``m`` functions (``basis=m``, :func:`bspline_basis`) or any matrix.
+B-splines are non-negative and sum to one, so bounds on the coefficients bound the spectrum:
+:math:`c \ge 0 \Rightarrow \alpha(\lambda) \ge 0`, :math:`0 \le c \le 1 \Rightarrow 0 \le \rho_g(\lambda) \le 1`.
+
+A parameter is *shared* by all samples of a fit or *per sample* (``per_sample=True``: one
+coefficient vector per sample, e.g. the thicknesses of a calibration series).
+
+Packing (:class:`Layout`): all coefficients, parameters in order, each flattened row-major
+(sample, coefficient), form the physical vector ``x``. Unconstrained solvers work on ``u`` with
+(:func:`Layout.to_physical`)
+
+* both bounds finite: :math:`x = l + (h-l)\,\sigma(u)` (logistic);
+* lower bound only: :math:`x = l + s\,e^{u}` (a log scale: thicknesses and α span decades);
+* upper bound only: :math:`x = h - s\,e^{u}`;
+* none: :math:`x = s\,u`,
+
+with :math:`s` the parameter's scale (its starting magnitude). A bound is never reached by a
+transform; when the optimum lies on a bound use the bounded solver (jaxopt L-BFGS-B), which works on
+:math:`z = x/s` and keeps bounds exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Optional, Sequence, Union
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from layerstack_jax import Cauchy, Index, LambertianBackground, Layer, LayerstackError, Sellmeier, Stack
+from layerstack_jax._stack import as_spectrum
+
+__all__ = [
+    "Parameter",
+    "thickness",
+    "alpha",
+    "rho_g",
+    "index_n",
+    "dispersion",
+    "bspline_basis",
+    "ResolvedParameter",
+    "Layout",
+]
+
+LayerRef = Union[int, str]
+_KINDS = ("thickness", "alpha", "rho_g", "n", "coefficient", "other")
+# default bounds by kind (PHYSICS conventions: thickness >= 0, 0 <= rho_g <= 1, alpha >= 0, n >= 1)
+_DEFAULT_BOUNDS = {
+    "thickness": (0.0, math.inf),
+    "alpha": (0.0, math.inf),
+    "rho_g": (0.0, 1.0),
+    "n": (1.0, math.inf),
+    "coefficient": (-math.inf, math.inf),
+    "other": (-math.inf, math.inf),
+}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Parameter:
+    """One free parameter: a numeric leaf of the stack, its bounds and its spectral basis.
+
+    Attributes:
+        name: label in reports (default: built from the path).
+        path: location of the leaf, e.g. ``("layers", 0, "thickness")``, ``("layers", "varnish",
+            "alpha")``, ``("exit", "reflectance")``, ``("layers", 1, "index", "A")``.
+        kind: ``thickness`` (nm), ``alpha`` (1/nm), ``rho_g``, ``n``, ``coefficient`` or
+            ``other``; decides the default bounds.
+        value: starting value (coefficients), or None to take it from the stack. Scalar,
+            ``(m,)``, or for a per-sample parameter ``(samples,)`` / ``(samples, m)``.
+        lower, upper: bounds on the coefficients (scalar or ``(m,)``); None: the kind's default.
+        basis: None (the leaf itself is the value: scalar or a vector of coefficients such as
+            Sellmeier B), ``"free"`` (one value per model wavelength), an int m (clamped cubic
+            B-splines with m functions over the model grid) or a ``(wl, m)`` matrix.
+        per_sample: one value per sample instead of one shared by all samples.
+        smoothness: weight of a second-difference penalty on the spectrum ``B c`` (adds
+            residuals :math:`\\sqrt{w}\\,\\Delta^2 v`); 0 for none.
+        scale: typical magnitude (default: from the starting value); conditions the solvers.
+        fixed: optional boolean mask shaped like the value (e.g. ``[True, False, False]`` for
+            a per-sample thickness whose first sample is known): those components keep their
+            starting value and are not fitted.
+    """
+
+    path: tuple
+    kind: str = "other"
+    name: str = ""
+    value: object = None
+    lower: object = None
+    upper: object = None
+    basis: object = None
+    per_sample: bool = False
+    smoothness: float = 0.0
+    scale: object = None
+    fixed: object = None
+
+    def __post_init__(self):
+        if not isinstance(self.path, tuple) or not self.path:
+            raise LayerstackError(f"Parameter.path must be a non-empty tuple, got {self.path!r}")
+        if self.kind not in _KINDS:
+            raise LayerstackError(f"Parameter {self.label}: kind must be one of {_KINDS}, got {self.kind!r}")
+        if not (isinstance(self.smoothness, (int, float)) and self.smoothness >= 0):
+            raise LayerstackError(f"Parameter {self.label}: smoothness must be a number >= 0, got {self.smoothness!r}")
+        if not (self.basis is None or isinstance(self.basis, (str, int, np.ndarray)) or hasattr(self.basis, "shape")):
+            raise LayerstackError(f"Parameter {self.label}: basis must be None, 'free', an int or a (wl, m) matrix")
+        if isinstance(self.basis, str) and self.basis != "free":
+            raise LayerstackError(f"Parameter {self.label}: basis must be None, 'free', an int or a matrix, got {self.basis!r}")
+
+    @property
+    def label(self) -> str:
+        if self.name:
+            return self.name
+        parts = [str(p) for p in self.path if p not in ("layers", "index")]
+        return ".".join(parts)
+
+
+def _layer_path(layer: LayerRef, *rest) -> tuple:
+    if layer == "ambient":  # the ambient is a material itself, not a layer holding one
+        return ("ambient", *(r for r in rest if r != "index"))
+    if layer == "exit":
+        return ("exit", *rest)
+    return ("layers", layer, *rest)
+
+
+def thickness(layer: LayerRef, *, value=None, lower=None, upper=None, per_sample=False, name="", scale=None,
+              fixed=None) -> Parameter:
+    """Thickness (nm, default bounds [0, ∞)) of a layer given by position or name."""
+    return Parameter(_layer_path(layer, "thickness"), "thickness", name or f"thickness[{layer}]", value, lower, upper,
+                     None, per_sample, 0.0, scale, fixed)
+
+
+def alpha(layer: LayerRef, *, basis=None, value=None, lower=None, upper=None, per_sample=False, smoothness=0.0,
+          name="", scale=None) -> Parameter:
+    """Absorption coefficient α (1/nm, default bounds [0, ∞)) of an incoherent layer: a scalar
+    (``basis=None``), per wavelength (``"free"``) or on a basis (int m or matrix)."""
+    return Parameter(_layer_path(layer, "alpha"), "alpha", name or f"alpha[{layer}]", value, lower, upper, basis,
+                     per_sample, smoothness, scale)
+
+
+def rho_g(*, basis=None, value=None, lower=None, upper=None, per_sample=False, smoothness=0.0, name="rho_g",
+          scale=None) -> Parameter:
+    """Intrinsic reflectance ρg of the Lambertian background (default bounds [0, 1])."""
+    return Parameter(("exit", "reflectance"), "rho_g", name, value, lower, upper, basis, per_sample, smoothness, scale)
+
+
+def index_n(medium: LayerRef, *, basis=None, value=None, lower=None, upper=None, per_sample=False, smoothness=0.0,
+            name="", scale=None) -> Parameter:
+    """Real index n (default bounds [1, ∞)) of a medium whose material is an :class:`~layerstack_jax.Index`:
+    a layer (position or name), ``"ambient"`` or ``"exit"``."""
+    return Parameter(_layer_path(medium, "index", "n"), "n", name or f"n[{medium}]", value, lower, upper, basis,
+                     per_sample, smoothness, scale)
+
+
+def dispersion(medium: LayerRef, coefficient: str, *, value=None, lower=None, upper=None, per_sample=False, name="",
+               scale=None) -> Parameter:
+    """A coefficient of a :class:`~layerstack_jax.Cauchy` (``A``, ``B``, ``C``, ``k``) or
+    :class:`~layerstack_jax.Sellmeier` (``B``, ``C`` — vectors —, ``k``) dispersion (λ in µm)."""
+    kind = "n" if coefficient == "A" else "coefficient"
+    lo = lower if lower is not None else (0.0 if coefficient == "k" else None)
+    return Parameter(_layer_path(medium, "index", coefficient), kind, name or f"{coefficient}[{medium}]", value, lo,
+                     upper, None, per_sample, 0.0, scale)
+
+
+# --------------------------------------------------------------------------- basis
+def bspline_basis(wavelength_nm, n_coefficients: int, degree: int = 3) -> np.ndarray:
+    """Clamped B-spline basis on uniform knots spanning the grid, ``(wl, n_coefficients)``.
+
+    Cox–de Boor recursion in numpy (built once, applied as a matrix in jnp). Columns are
+    non-negative and each row sums to one (partition of unity). The degree is lowered to
+    ``n_coefficients − 1`` when fewer functions than ``degree + 1`` are asked for.
+    """
+    x = np.asarray(wavelength_nm, dtype=float)
+    m = int(n_coefficients)
+    if x.ndim != 1 or x.size < 2 or np.any(np.diff(x) <= 0):
+        raise LayerstackError("bspline_basis: wavelength_nm must be a strictly increasing 1-D grid of >= 2 points")
+    if m < 1 or m > x.size:
+        raise LayerstackError(f"bspline_basis: n_coefficients must lie in [1, {x.size}], got {n_coefficients}")
+    k = min(int(degree), m - 1)
+    inner = np.linspace(x[0], x[-1], m - k + 1)
+    t = np.concatenate([np.full(k, x[0]), inner, np.full(k, x[-1])])
+    # degree 0
+    B = np.zeros((x.size, t.size - 1))
+    for j in range(t.size - 1):
+        B[:, j] = (t[j] <= x) & (x < t[j + 1])
+    last = np.nonzero(t[:-1] < t[1:])[0][-1]
+    B[x == x[-1], :] = 0.0
+    B[x == x[-1], last] = 1.0  # the right end belongs to the last non-empty interval
+    for d in range(1, k + 1):
+        nxt = np.zeros((x.size, t.size - 1 - d))
+        for j in range(t.size - 1 - d):
+            a = t[j + d] - t[j]
+            b = t[j + d + 1] - t[j + 1]
+            left = (x - t[j]) / a * B[:, j] if a > 0 else 0.0
+            right = (t[j + d + 1] - x) / b * B[:, j + 1] if b > 0 else 0.0
+            nxt[:, j] = left + right
+        B = nxt
+    return B
+
+
+# ---------------------------------------------------------------- resolution on a stack
+def _find_layer(stack: Stack, ref, label: str) -> int:
+    names = [layer.name for layer in stack.layers]
+    if isinstance(ref, (int, np.integer)) and not isinstance(ref, bool):
+        i = int(ref)
+        if not -len(names) <= i < len(names):
+            raise LayerstackError(f"free parameter {label!r}: the stack has {len(names)} layer(s), no layer {ref}")
+        return i % len(names)
+    if isinstance(ref, str):
+        hits = [i for i, n in enumerate(names) if n == ref]
+        if not hits:
+            raise LayerstackError(f"free parameter {label!r}: the stack has no layer named {ref!r} (layers: {names})")
+        if len(hits) > 1:
+            raise LayerstackError(f"free parameter {label!r}: several layers are named {ref!r}; give the position")
+        return hits[0]
+    raise LayerstackError(f"free parameter {label!r}: a layer is given by position or name, got {ref!r}")
+
+
+def canonical_path(stack: Stack, p: Parameter) -> tuple:
+    """The path with layer names replaced by positions, checked against the stack."""
+    label = p.label
+    path = p.path
+    if path[0] == "layers":
+        if len(path) < 3:
+            raise LayerstackError(f"free parameter {label!r}: path {path!r} names no field of a layer")
+        path = ("layers", _find_layer(stack, path[1], label), *path[2:])
+    elif path[0] not in ("ambient", "exit"):
+        raise LayerstackError(f"free parameter {label!r}: path must start with 'layers', 'ambient' or 'exit', got {path!r}")
+    if path[:2] == ("exit", "reflectance") and not isinstance(stack.exit, LambertianBackground):
+        raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
+    node = stack
+    where = "stack"
+    for part in path:
+        if isinstance(part, int):
+            node = node[part]
+            where += f"[{part}]"
+            continue
+        if not hasattr(node, part) or part.startswith("_"):
+            fields = [f.name for f in dataclasses.fields(node)] if dataclasses.is_dataclass(node) else []
+            raise LayerstackError(
+                f"free parameter {label!r}: {where} ({type(node).__name__}) has no field {part!r}"
+                + (f" (fields: {fields})" if fields else "")
+            )
+        node = getattr(node, part)
+        where += f".{part}"
+    if isinstance(node, eqx.Module) and not hasattr(node, "__call__"):
+        raise LayerstackError(f"free parameter {label!r}: {where} is a {type(node).__name__}, not a number")
+    if path[-1] == "alpha" and path[0] == "layers" and stack.layers[path[1]].coherent:
+        raise LayerstackError(
+            f"free parameter {label!r}: layer {path[1]} is coherent; alpha is for incoherent layers (fit k instead)"
+        )
+    if path[0] == "exit" and path[-1] == "reflectance" and not isinstance(stack.exit, LambertianBackground):
+        raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
+    if path[-2:-1] == ("index",) and path[-1] in ("n", "k", "A", "B", "C"):
+        mat = get_path(stack, path[:-1])
+        allowed = {Index: ("n", "k"), Cauchy: ("A", "B", "C", "k"), Sellmeier: ("B", "C", "k")}
+        if type(mat) in allowed and path[-1] not in allowed[type(mat)]:
+            raise LayerstackError(
+                f"free parameter {label!r}: {type(mat).__name__} has no coefficient {path[-1]!r} "
+                f"(it has {allowed[type(mat)]})"
+            )
+    return path
+
+
+def get_path(tree, path: tuple):
+    node = tree
+    for part in path:
+        node = node[part] if isinstance(part, int) else getattr(node, part)
+    return node
+
+
+def _current_leaf(stack: Stack, path: tuple, wavelength_nm: np.ndarray, spectral: bool):
+    leaf = get_path(stack, path)
+    if leaf is None:
+        return None
+    if callable(leaf) and not isinstance(leaf, (np.ndarray,)) and not hasattr(leaf, "shape"):
+        return np.asarray(as_spectrum(leaf, wavelength_nm), dtype=float)
+    a = np.asarray(leaf, dtype=float)
+    if spectral and a.ndim == 0:
+        a = np.full(wavelength_nm.shape, float(a))
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ResolvedParameter:
+    """A parameter checked against a stack and a wavelength grid.
+
+    ``basis``: ``(wl, m)`` or None; ``x0``: starting coefficients ``(m,)`` or ``(samples, m)``;
+    ``lower``, ``upper``, ``scale``: ``(m,)``; ``leaf_shape``: shape of the value put in the stack.
+    """
+
+    parameter: Parameter
+    path: tuple
+    basis: Optional[np.ndarray]
+    x0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    scale: np.ndarray
+    leaf_shape: tuple
+    fixed: np.ndarray
+
+    @property
+    def name(self) -> str:
+        return self.parameter.label
+
+    @property
+    def m(self) -> int:
+        return self.x0.shape[-1]
+
+    @property
+    def per_sample(self) -> bool:
+        return self.parameter.per_sample
+
+    @property
+    def size(self) -> int:
+        return self.x0.size
+
+    @property
+    def public_shape(self) -> tuple:
+        """Shape of the value reported to users: ``()`` / ``(samples,)`` for a one-number leaf,
+        else the coefficient shape ``(m,)`` / ``(samples, m)``."""
+        if self.basis is None and self.leaf_shape == ():
+            return self.x0.shape[:-1]
+        return self.x0.shape
+
+    def leaf(self, coefficients):
+        """Value placed in the stack: ``B c`` for a spectral parameter, else the coefficients
+        (a scalar for a one-number leaf)."""
+        if self.basis is not None:
+            return jnp.asarray(self.basis) @ coefficients
+        return coefficients.reshape(self.leaf_shape)
+
+    def spectrum(self, coefficients) -> np.ndarray:
+        c = np.asarray(coefficients)
+        return c @ self.basis.T if self.basis is not None else c
+
+
+def _broadcast(p: Parameter, what: str, v, m: int, default: float) -> np.ndarray:
+    if v is None:
+        v = default
+    a = np.asarray(v, dtype=float)
+    if a.ndim == 0:
+        a = np.full(m, float(a))
+    if a.shape != (m,):
+        raise LayerstackError(f"free parameter {p.label!r}: {what} must be a number or {m} values, got shape {a.shape}")
+    if np.any(np.isnan(a)):
+        raise LayerstackError(f"free parameter {p.label!r}: {what} is NaN")
+    return a
+
+
+def resolve_parameter(p: Parameter, stack: Stack, wavelength_nm: np.ndarray, n_samples: int) -> ResolvedParameter:
+    """Check ``p`` against the stack and grid; build its basis, start, bounds and scale."""
+    label = p.label
+    path = canonical_path(stack, p)
+    wl = np.asarray(wavelength_nm, float)
+    leaf = _current_leaf(stack, path, wl, spectral=p.basis is not None)
+    basis = p.basis
+    if basis is None and leaf is not None and leaf.ndim == 1 and leaf.shape == wl.shape and path[-1] in (
+        "alpha", "reflectance", "n"
+    ):
+        basis = "free"  # the stack holds a spectrum: fit it per wavelength unless told otherwise
+    if isinstance(basis, str):
+        B = np.eye(wl.size)
+    elif isinstance(basis, (int, np.integer)):
+        B = bspline_basis(wl, int(basis))
+    elif basis is None:
+        B = None
+    else:
+        B = np.asarray(basis, dtype=float)
+        if B.ndim != 2 or B.shape[0] != wl.size:
+            raise LayerstackError(
+                f"free parameter {label!r}: basis must be a ({wl.size}, m) matrix on the model grid, got shape {B.shape}"
+            )
+    # starting value
+    if p.value is not None:
+        x0 = np.asarray(p.value, dtype=float)
+        if B is None and leaf is not None and leaf.ndim == 1 and x0.ndim == 0:
+            x0 = np.full(leaf.shape, float(x0))
+    else:
+        if leaf is None:
+            raise LayerstackError(f"free parameter {label!r}: the stack holds no value here; give value=")
+        if B is not None:
+            v = np.broadcast_to(leaf, wl.shape) if leaf.ndim == 0 else leaf
+            if v.shape != wl.shape:
+                raise LayerstackError(f"free parameter {label!r}: stack value has shape {v.shape}, grid has {wl.shape}")
+            x0 = np.linalg.lstsq(B, v, rcond=None)[0]
+        else:
+            x0 = leaf
+    if B is not None:
+        leaf_shape = wl.shape
+        m = B.shape[1]
+    else:
+        if leaf is not None:
+            leaf_shape = np.shape(leaf)
+        elif p.per_sample and x0.ndim >= 1 and x0.shape[0] == n_samples:
+            leaf_shape = x0.shape[1:]
+        else:
+            leaf_shape = x0.shape
+        m = int(np.prod(leaf_shape)) if leaf_shape else 1
+    if B is not None and x0.ndim == 0:
+        x0 = np.linalg.lstsq(B, np.full(wl.shape, float(x0)), rcond=None)[0]
+    # per-sample broadcasting
+    if p.per_sample:
+        if x0.ndim == 0 or x0.shape == (m,) and not (m == 1 and x0.shape == (n_samples,)):
+            x0 = np.broadcast_to(np.reshape(x0, (1, m)), (n_samples, m)).copy()
+        elif x0.shape == (n_samples,) and m == 1:
+            x0 = x0.reshape(n_samples, 1)
+        elif B is not None and x0.shape == (n_samples, wl.size) and B.shape[1] != wl.size:
+            x0 = np.linalg.lstsq(B, x0.T, rcond=None)[0].T
+        if x0.shape != (n_samples, m):
+            raise LayerstackError(
+                f"free parameter {label!r}: per-sample value must be shaped ({n_samples},) or ({n_samples}, {m}), got {x0.shape}"
+            )
+    else:
+        x0 = np.reshape(x0, -1) if x0.size == m else x0
+        if x0.shape != (m,):
+            raise LayerstackError(f"free parameter {label!r}: value must be a number or {m} values, got shape {x0.shape}")
+    if np.any(~np.isfinite(x0)):
+        raise LayerstackError(f"free parameter {label!r}: starting value is not finite")
+    dlo, dhi = _DEFAULT_BOUNDS[p.kind]
+    lo = _broadcast(p, "lower bound", p.lower, m, dlo)
+    hi = _broadcast(p, "upper bound", p.upper, m, dhi)
+    bad = lo >= hi
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        raise LayerstackError(
+            f"free parameter {label!r}: bounds inverted or empty (lower {lo[i]:g} >= upper {hi[i]:g}"
+            + (f" for coefficient {i}" if m > 1 else "") + ")"
+        )
+    outside = (x0 < lo) | (x0 > hi)
+    if np.any(outside):
+        raise LayerstackError(
+            f"free parameter {label!r}: starting value {x0[outside].ravel()[0]:g} outside its bounds "
+            f"[{np.broadcast_to(lo, x0.shape)[outside].ravel()[0]:g}, {np.broadcast_to(hi, x0.shape)[outside].ravel()[0]:g}]"
+        )
+    if p.scale is not None:
+        scale = _broadcast(p, "scale", p.scale, m, 1.0)
+        if np.any(scale <= 0):
+            raise LayerstackError(f"free parameter {label!r}: scale must be > 0")
+    else:
+        mag = np.abs(x0).reshape(-1, m).max(axis=0)
+        span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+        scale = np.where(mag > 0, mag, np.where(span > 0, span, 1.0))
+        if B is not None:  # coefficients of one spectrum share one scale
+            scale = np.full(m, scale.max())
+    if p.fixed is None:
+        fixed = np.zeros(x0.shape, bool)
+    else:
+        f = np.asarray(p.fixed)
+        if f.dtype != bool:
+            raise LayerstackError(f"free parameter {label!r}: fixed must be a boolean mask")
+        if p.per_sample and f.shape == (n_samples,):
+            f = f[:, None]
+        try:
+            fixed = np.broadcast_to(f, x0.shape).copy()
+        except ValueError:
+            raise LayerstackError(f"free parameter {label!r}: fixed mask shaped {f.shape} does not match the value {x0.shape}") from None
+    return ResolvedParameter(p, path, B, x0, lo, hi, scale, leaf_shape, fixed)
+
+
+# ------------------------------------------------------------------------------ layout
+class Layout:
+    """Flat packing of resolved parameters and the bound transforms (module docstring)."""
+
+    def __init__(self, params: Sequence[ResolvedParameter], n_samples: int):
+        self.params = tuple(params)
+        self.n_samples = n_samples
+        paths = [p.path for p in self.params]
+        for i, p in enumerate(paths):
+            if paths.index(p) != i:
+                raise LayerstackError(f"free parameter {self.params[i].name!r}: the same stack leaf {p} is freed twice")
+        sizes = [p.size for p in self.params]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        rep = lambda a, p: np.tile(a, p.x0.shape[0]) if p.per_sample else a  # noqa: E731
+        cat = lambda parts: np.concatenate(parts) if parts else np.zeros(0)  # noqa: E731
+        # full coefficient vector (fixed components included) …
+        self.full_x0 = cat([p.x0.ravel() for p in self.params])
+        fixed = cat([p.fixed.ravel() for p in self.params]).astype(bool)
+        # … and the free components the solvers see
+        self.free_index = np.nonzero(~fixed)[0]
+        idx = self.free_index
+        self.size = int(idx.size)
+        self.lower = cat([rep(p.lower, p) for p in self.params])[idx]
+        self.upper = cat([rep(p.upper, p) for p in self.params])[idx]
+        self.scale = cat([rep(p.scale, p) for p in self.params])[idx]
+        self.x0 = self.full_x0[idx]
+        lo_f, hi_f = np.isfinite(self.lower), np.isfinite(self.upper)
+        self.both = np.nonzero(lo_f & hi_f)[0]
+        self.low = np.nonzero(lo_f & ~hi_f)[0]
+        self.high = np.nonzero(~lo_f & hi_f)[0]
+        self.free = np.nonzero(~lo_f & ~hi_f)[0]
+        self.names = [self._component(int(j)) for j in idx]
+        # which parameter each free component belongs to
+        owner = cat([np.full(p.size, i) for i, p in enumerate(self.params)]).astype(int)
+        self.owner = owner[idx]
+        self.free_count = [int((self.owner == i).sum()) for i in range(len(self.params))]
+
+    def _component(self, j: int) -> str:
+        i = int(np.searchsorted(self.offsets, j, side="right") - 1)
+        p = self.params[i]
+        k = j - self.offsets[i]
+        if p.per_sample:
+            s, c = divmod(k, p.m)
+            return f"{p.name}[sample {s}]" + (f"[{c}]" if p.m > 1 else "")
+        return p.name + (f"[{k}]" if p.m > 1 else "")
+
+    # ------------------------------------------------------------- transforms
+    def to_physical(self, u):
+        """Unconstrained ``u`` → physical ``x`` (module docstring)."""
+        lo, hi, s = (jnp.asarray(a, dtype=u.dtype) for a in (self.lower, self.upper, self.scale))
+        x = jnp.zeros_like(u)
+        b, lw, hg, fr = self.both, self.low, self.high, self.free
+        if b.size:
+            x = x.at[b].set(lo[b] + (hi[b] - lo[b]) * jnp.reciprocal(1.0 + jnp.exp(-u[b])))
+        if lw.size:
+            x = x.at[lw].set(lo[lw] + s[lw] * jnp.exp(u[lw]))
+        if hg.size:
+            x = x.at[hg].set(hi[hg] - s[hg] * jnp.exp(u[hg]))
+        if fr.size:
+            x = x.at[fr].set(s[fr] * u[fr])
+        return x
+
+    def to_unconstrained(self, x) -> np.ndarray:
+        """Inverse of :meth:`to_physical` (numpy); values on a bound are nudged inside by
+        1e-9 of the range or scale."""
+        x = np.asarray(x, dtype=float)
+        u = np.zeros_like(x)
+        lo, hi, s = self.lower, self.upper, self.scale
+        b, lw, hg, fr = self.both, self.low, self.high, self.free
+        if b.size:
+            t = np.clip((x[..., b] - lo[b]) / (hi[b] - lo[b]), 1e-9, 1 - 1e-9)
+            u[..., b] = np.log(t) - np.log1p(-t)
+        if lw.size:
+            u[..., lw] = np.log(np.maximum((x[..., lw] - lo[lw]) / s[lw], 1e-9))
+        if hg.size:
+            u[..., hg] = np.log(np.maximum((hi[hg] - x[..., hg]) / s[hg], 1e-9))
+        if fr.size:
+            u[..., fr] = x[..., fr] / s[fr]
+        return u
+
+    # --------------------------------------------------------------- unpacking
+    def full(self, x, fill=None):
+        """Free components ``(..., P)`` → all coefficients ``(..., F)``; fixed ones take their
+        starting value, or ``fill`` if given."""
+        base = self.full_x0 if fill is None else np.full(self.full_x0.shape, fill, dtype=float)
+        if isinstance(x, np.ndarray):
+            out = np.broadcast_to(base, x.shape[:-1] + base.shape).astype(float)
+            out[..., self.free_index] = x
+            return out
+        out = jnp.broadcast_to(jnp.asarray(base, dtype=x.dtype), x.shape[:-1] + base.shape)
+        return out.at[..., self.free_index].set(x)
+
+    def split(self, x, fill=None) -> list:
+        """Free components ``(..., P)`` → per-parameter coefficient arrays ``(..., m)`` or
+        ``(..., samples, m)`` (fixed components: starting value, or ``fill``)."""
+        f = self.full(x, fill)
+        out = []
+        for p, a, b in zip(self.params, self.offsets[:-1], self.offsets[1:]):
+            out.append(f[..., a:b].reshape(f.shape[:-1] + p.x0.shape))
+        return out
+
+    def values(self, x, fill=None) -> dict:
+        """``{name: value}`` in each parameter's public shape (scalars for one-number leaves)."""
+        x = np.asarray(x, dtype=float)
+        return {p.name: np.asarray(c).reshape(x.shape[:-1] + p.public_shape)
+                for p, c in zip(self.params, self.split(x, fill))}
+
+    def inject(self, stack: Stack, coefficients: list, sample=None) -> Stack:
+        """Put the parameter values (per sample: row ``sample``, or already sliced when
+        ``sample`` is None and the arrays are per-sample rows) into ``stack`` (``equinox.tree_at``)."""
+        if not self.params:
+            return stack
+        values = []
+        for p, c in zip(self.params, coefficients):
+            if p.per_sample and sample is not None:
+                c = c[sample]
+            values.append(p.leaf(c))
+        paths = [p.path for p in self.params]
+        return eqx.tree_at(
+            lambda st: tuple(get_path(st, path) for path in paths),
+            stack,
+            tuple(values),
+            is_leaf=lambda x: x is None,
+        )

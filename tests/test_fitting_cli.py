@@ -1,0 +1,101 @@
+"""`layerstack fit` and free parameters in stack files (layerstack_jax.io.load_fit_stack).
+
+The data are made by the public forward model with known values; the command line must give
+them back. A cheap model (an absorbing slab on glass, specular transmittance) keeps compilation
+short.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import layerstack_jax as ls
+from layerstack_jax.cli import main
+from layerstack_jax.io import load_fit_stack, load_stack, save_spectra_csv
+
+WL = np.arange(400.0, 701.0, 10.0)
+
+STACK = """
+[[layers]]
+name = "slab"
+n = 1.5
+thickness_nm = {{ value = 8000, free = true, min = 0, max = 1e5 }}
+coherent = false
+alpha_per_nm = {alpha}
+
+[substrate]
+n = 1.5
+"""
+
+
+def _truth(h, alpha):
+    st = ls.Stack(1.0, [ls.Layer(1.5, h, coherent=False, alpha=alpha, name="slab")], ls.Substrate(1.5))
+    return np.asarray(ls.reflectance(st, WL, ls.Specular(0.0, "T")))
+
+
+def test_load_fit_stack_declarations(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text(STACK.format(alpha="{ value = 2e-5, free = true, basis = 4 }"))
+    stack, free = load_fit_stack(f)
+    assert float(stack.layers[0].thickness) == 8000.0
+    assert [d["kind"] for d in free] == ["thickness", "alpha"]
+    assert free[0]["path"] == ("layers", "slab", "thickness") and free[0]["upper"] == 1e5
+    assert free[1]["basis"] == 4
+    # load_stack reads the same file, values only
+    assert float(load_stack(f).layers[0].alpha) == 2e-5
+
+
+@pytest.mark.parametrize(
+    "alpha, message",
+    [
+        ("{ value = 2e-5, free = true, min = 1, max = 0 }", "bounds inverted"),
+        ("{ value = 2e-5, min = 0 }", "given but free is not true"),
+        ("{ free = true }", "missing value"),
+        ("{ value = 2e-5, free = true, basis = 0 }", "basis must be"),
+    ],
+)
+def test_bad_free_declarations(tmp_path, alpha, message):
+    f = tmp_path / "s.toml"
+    f.write_text(STACK.format(alpha=alpha))
+    with pytest.raises(ls.LayerstackError, match=message):
+        load_fit_stack(f)
+
+
+def test_cli_fit_recovers_thickness(tmp_path, capsys):
+    stack = tmp_path / "s.toml"
+    stack.write_text(STACK.format(alpha="2e-5"))
+    data = tmp_path / "d.csv"
+    save_spectra_csv(data, WL, {"a": _truth(10_000.0, 2e-5), "b": _truth(12_500.0, 2e-5)})
+    out = tmp_path / "r.json"
+    png = tmp_path / "fit.png"
+    code = main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", str(out), "--plot", str(png)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "layerstack fit report" in text and "### b" in text
+    d = json.loads(out.read_text())
+    h = [f["parameters"]["thickness_nm[slab]"]["value"] for f in d["fits"]]
+    np.testing.assert_allclose(h, [10_000.0, 12_500.0], rtol=1e-8)
+    assert png.stat().st_size > 10_000
+
+
+def test_cli_fit_errors(tmp_path, capsys):
+    stack = tmp_path / "s.toml"
+    stack.write_text(STACK.format(alpha="2e-5"))
+    data = tmp_path / "d.csv"
+    save_spectra_csv(data, WL, {"a": _truth(10_000.0, 2e-5)})
+    out = str(tmp_path / "r.json")
+    # model grid beyond the data: never extrapolated
+    assert main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", out, "-w", "380:700:10"]) == 2
+    assert "never extrapolated" in capsys.readouterr().err
+    # negative data
+    save_spectra_csv(data, WL, {"a": _truth(10_000.0, 2e-5) - 0.95})
+    assert main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", out]) == 2
+    assert "negative reflectance" in capsys.readouterr().err
+    # no free parameter
+    plain = tmp_path / "p.toml"
+    plain.write_text(STACK.format(alpha="2e-5").replace("{ value = 8000, free = true, min = 0, max = 1e5 }", "8000"))
+    assert main(["fit", str(plain), str(data), "-g", "specular:0:T", "-o", out]) == 2
+    assert "no free parameter" in capsys.readouterr().err

@@ -61,6 +61,31 @@ def _run_section(name: str, quick: bool, out_dir: Path) -> dict:
     return payload
 
 
+def _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start, partial=False):
+    """Write latest.md / latest.json (also after each section, so a cut-short run leaves a report)."""
+    case_info = []
+    for name in sorted({b.case for b in benches}):
+        c = get_case(name)
+        case_info.append({"name": name, "description": c.description, "n_points": c.n_points, "shape": c.shape,
+                          "n_layers": c.n_layers, "d_nm": c.d.tolist()})
+    payload = {
+        "command": command + (" (PARTIAL: run still in progress or cut short)" if partial else ""),
+        "mode": mode.name,
+        "mode_settings": mode.__dict__,
+        "machine": machine,
+        "cases": case_info,
+        "peers": peers,
+        "hooks": reg.hooks,
+        "rows": rows,
+        "sections": section_results,
+    }
+    payload["targets"] = targets(payload)
+    payload["total_wall_s"] = time.perf_counter() - t_start
+    jp = _harness.write_json(payload, Path(out_dir) / "latest.json")
+    mp = _harness.write_markdown(payload, Path(out_dir) / "latest.md")
+    return mp, jp
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -153,31 +178,13 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         res = _run_section(name, a.quick, out_dir)
         section_results[name] = res
+        _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start, partial=True)
         print(f"[benchmarks] section {name:10s} {res.get('status')}  ({time.perf_counter() - t0:.1f} s)", flush=True)
         if res.get("error"):
             print(res["error"], file=sys.stderr)
 
-    case_info = []
-    for name in sorted({b.case for b in benches}):
-        c = get_case(name)
-        case_info.append({"name": name, "description": c.description, "n_points": c.n_points, "shape": c.shape,
-                          "n_layers": c.n_layers, "d_nm": c.d.tolist()})
-    payload = {
-        "command": command,
-        "mode": mode.name,
-        "mode_settings": mode.__dict__,
-        "machine": machine,
-        "cases": case_info,
-        "peers": peers,
-        "hooks": reg.hooks,
-        "rows": rows,
-        "sections": section_results,
-    }
-    payload["targets"] = targets(payload)
-    payload["total_wall_s"] = time.perf_counter() - t_start
-    jp = _harness.write_json(payload, out_dir / "latest.json")
-    mp = _harness.write_markdown(payload, out_dir / "latest.md")
-    print(f"[benchmarks] wrote {mp} and {jp} in {payload['total_wall_s']:.1f} s", flush=True)
+    mp, jp = _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start)
+    print(f"[benchmarks] wrote {mp} and {jp} in {time.perf_counter() - t_start:.1f} s", flush=True)
     return 0
 
 

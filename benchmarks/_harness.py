@@ -569,11 +569,11 @@ def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "lates
     rows_p1 = payload.get("rows", [])
     if rows_p1:
         lines += ["", "## P1 — coherent multilayer, all implementations"]
-    lines += ["", "| " + " | ".join(h for h, _, _ in MD_COLUMNS) + " |", "|" + "---|" * len(MD_COLUMNS)]
-    for row in payload.get("rows", []):
+        lines += ["", "| " + " | ".join(h for h, _, _ in MD_COLUMNS) + " |", "|" + "---|" * len(MD_COLUMNS)]
+    for row in rows_p1:
         cells = [_md_escape(_fmt(row.get(key), fmt)) for _, key, fmt in MD_COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Times are per call of the whole case (both polarizations) unless the notes say otherwise;",
+    lines += [] if not rows_p1 else ["", "Times are per call of the whole case (both polarizations) unless the notes say otherwise;",
               "`full grid (s)` is the measured median for rows timed on the full grid, else the per-point",
               "cost extrapolated to the full grid. `compile / 1st-call overhead` is trace + lower + XLA",
               "compile when measured ahead-of-time (jitted JAX functions), otherwise first call minus median.",

@@ -26,13 +26,13 @@ SECTIONS: dict[str, str] = {
     "P2": "benchmarks.radiometric:run_section",
     "P3": "benchmarks.mixed",
     "MEMORY": "benchmarks.memory",
-    "SCALING": "benchmarks.scaling",
-    "ACCURACY": "benchmarks.accuracy",
     "PRECISION": "benchmarks.precision",
+    "ACCURACY": "benchmarks.accuracy",
+    "SCALING": "benchmarks.scaling",
 }
 
-#: Generous per-section worker timeouts (s), full mode; quick mode uses a quarter.
-TIMEOUTS: dict[str, float] = {"P2": 600, "P3": 900, "MEMORY": 1500, "SCALING": 1200, "ACCURACY": 600, "PRECISION": 600}
+#: Generous per-section worker timeouts (s), quick and full mode alike.
+TIMEOUTS: dict[str, float] = {"P2": 900, "P3": 900, "MEMORY": 2000, "SCALING": 1200, "ACCURACY": 900, "PRECISION": 900}
 
 
 def setup_jax(x64: bool = True):

@@ -36,7 +36,7 @@ import numpy as np
 from ._sections import figure, save, setup_jax
 
 GLASS_EXACT = 0.596345759708  # internal diffuse reflectance of n = 1.5 (12 digits; checked against the formula)
-PER_SEGMENT_FULL = (2, 4, 6, 8, 12, 16, 24, 32)
+PER_SEGMENT_FULL = (2, 4, 8, 12, 16, 24, 32)
 PLAIN_FULL = (4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048)
 PER_SEGMENT_QUICK = (8, 24)
 PLAIN_QUICK = (16, 256)

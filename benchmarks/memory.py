@@ -10,7 +10,7 @@ intermediates scale with ``chunk``, not with the batch; the output ``(N, 401)`` 
 for N = 100,000) is returned as one array and is part of the peak.
 
 The headline figure is N = 100,000 at chunk 10; the chunk sweep (10, 100, 1000, 10000) uses
-N = 10,000 (to keep the run short on a shared 2-core machine: the intermediates, hence the peak,
+N = 2,000 (to keep the run short on a shared 2-core machine: the intermediates, hence the peak,
 depend on the chunk; N adds only the output array).  Each run is its own process (``python -m benchmarks.memory --child ...``) so its
 ``VmHWM`` is its own.  The parent polls the child's resident memory and kills it above
 ``RSS_CAP`` (a chunk that big is reported as "over cap", never allowed to swap the machine).
@@ -34,7 +34,7 @@ from ._sections import contention_note, figure, save
 
 N_FULL = 100_000  # the headline run, at chunk CHUNK_FULL
 CHUNK_FULL = 10
-N_SWEEP = 10_000  # the chunk-size sweep (peak memory is set by the chunk, not by N, beyond the output)
+N_SWEEP = 2_000  # the chunk-size sweep (peak memory is set by the chunk, not by N, beyond the output)
 CHUNKS_SWEEP = (10, 100, 1000, 10_000)
 QUICK = {"n": 1_000, "chunk": 10, "n_sweep": 200, "chunks": (10, 100)}
 RSS_CAP = 6 * 2**30  # kill a child above this resident size (shared 2-core / 23 GiB machine)
@@ -113,7 +113,7 @@ def run(quick: bool = False, out_dir=None) -> dict:
     n, chunk = (QUICK["n"], QUICK["chunk"]) if quick else (N_FULL, CHUNK_FULL)
     n_sweep, chunks = (QUICK["n_sweep"], QUICK["chunks"]) if quick else (N_SWEEP, CHUNKS_SWEEP)
     timeout = 300 if quick else 900
-    headline = _run_child(n, chunk, timeout)
+    headline = _run_child(n, chunk, 300 if quick else 1200)
     rows = [_run_child(n_sweep, c, timeout) for c in chunks]
     res = {"n": n, "chunk": chunk, "headline": headline, "n_sweep": n_sweep, "chunks": list(chunks), "rows": rows,
            "method": "jax.lax.map(model, H, batch_size=chunk) in one jit", "rss_cap_bytes": RSS_CAP, "target_bytes": TARGET}

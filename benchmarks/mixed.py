@@ -33,7 +33,7 @@ N_VARNISH = 1.6
 N_BACKGROUND = 1.55
 WAVELENGTHS = (380.0, 780.0, 401)
 BLOCK = 8  # samples per vmapped block inside lax.map
-BATCH = {"full": 2000, "quick": 16}
+BATCH = {"full": 200, "quick": 16}
 SEED = 20240603
 
 

@@ -103,7 +103,7 @@ def run(batch: int, block: int, nodes: int, float32: bool, accuracy: bool, quick
     return out
 
 
-BATCH_FULL = 2000
+BATCH_FULL = 1000
 BLOCK = 4
 
 

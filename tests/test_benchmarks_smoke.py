@@ -49,10 +49,11 @@ def test_p3_model_matches_tmm_and_quad_reference():
 
 
 def test_p3_runner_tiny():
-    res = mixed.run(quick=True, batch=2, block=1, n_wavelengths=3, check_points=(1, 1))
+    # physics is checked in test_p3_model_matches_tmm_and_quad_reference; this covers the runner
+    res = mixed.run(quick=True, batch=2, block=1, n_wavelengths=3, check_points=(0, 0))
     for key in ("forward", "value_and_grad", "jacfwd"):
         assert res[key]["finite"] and res[key]["spectra_per_s"] > 0
-    assert res["reference_check"]["max_abs_err_45_0"] < 1e-10
+    assert res["reference_check"] is None
     assert "Reference check" in "\n".join(mixed.markdown(res))
 
 

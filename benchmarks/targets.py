@@ -73,12 +73,12 @@ def targets(payload: dict) -> list[dict]:
         c = p3["forward"]["compile_s"]
         out.append(_t("compile: P3 forward", f"≤ {TARGET_COMPILE_S} s", f"{c:.2f} s", c <= TARGET_COMPILE_S))
     mem = sec.get("MEMORY", {})
-    if "rows" in mem:
-        ok = [r for r in mem["rows"] if r.get("status") == "ok"]
-        best = min(ok, key=lambda r: r["peak_rss_bytes"]) if ok else None
-        out.append(_t(f"bounded memory, {mem['n']:,} spectra", "< 2 GiB peak RSS at some chunk size",
-                      f"{best['peak_rss_bytes'] / 2**20:.0f} MiB at chunk {best['chunk']}" if best else None,
-                      (best["peak_rss_bytes"] < 2 * 2**30) if best else None))
+    h = mem.get("headline")
+    if h:
+        ok = h.get("status") == "ok"
+        out.append(_t(f"bounded memory, {h['n']:,} spectra in chunks", "< 2 GiB peak RSS",
+                      f"{h['peak_rss_bytes'] / 2**20:.0f} MiB at chunk {h['chunk']}" if ok else h.get("status"),
+                      (h["peak_rss_bytes"] < 2 * 2**30) if ok else None))
     return out
 
 

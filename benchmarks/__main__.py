@@ -1,8 +1,9 @@
-"""``python -m benchmarks [--quick] [--only P1,...] [--impl tmm-fast,...]``
+"""``python -m benchmarks [--quick] [--only P1,P2,P3,MEMORY,...] [--impl tmm-fast,...]``
 
-Runs the registered benchmarks, each in its own subprocess, and writes
-``benchmarks/results/latest.md`` and ``benchmarks/results/latest.json``.
-Nothing is installed: a peer that is not importable is reported as missing.
+Runs the registered P1 benchmarks (peers and layerstack_jax), then the whole-model sections
+(P2, P3, MEMORY, SCALING, ACCURACY, PRECISION; ``benchmarks._sections``), each in its own
+subprocess, and writes ``benchmarks/results/latest.md`` and ``latest.json`` (plus the PNG
+plots next to them). Nothing is installed: a peer that is not importable is reported as missing.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import _harness
+from . import _harness, _sections
 from ._registry import FULL, QUICK, build_registry
 from .cases import CASES, get_case
+from .targets import targets
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -45,11 +47,50 @@ def _fail_reason(res: _harness.SubprocessResult) -> str:
     return f"failed: worker exited with code {res.returncode}: {tail[0][:300]}"
 
 
+def _run_section(name: str, quick: bool, out_dir: Path) -> dict:
+    timeout = _sections.TIMEOUTS[name]  # same in quick mode: the shared machine compiles slowly
+    with tempfile.TemporaryDirectory(prefix="layerstack-section-") as td:
+        out = Path(td) / "out.json"
+        argv = [sys.executable, "-m", "benchmarks._sections", name, "--out", str(out), "--plot-dir", str(out_dir)]
+        if quick:
+            argv.append("--quick")
+        res = _harness.run_subprocess(argv, cwd=REPO_ROOT, timeout=timeout, env=dict(os.environ))
+        payload = json.loads(out.read_text()) if out.exists() else {"status": _fail_reason(res)}
+    payload["process_wall_s"] = res.wall_s
+    payload["loadavg_after"] = _harness.loadavg()
+    return payload
+
+
+def _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start, partial=False):
+    """Write latest.md / latest.json (also after each section, so a cut-short run leaves a report)."""
+    case_info = []
+    for name in sorted({b.case for b in benches}):
+        c = get_case(name)
+        case_info.append({"name": name, "description": c.description, "n_points": c.n_points, "shape": c.shape,
+                          "n_layers": c.n_layers, "d_nm": c.d.tolist()})
+    payload = {
+        "command": command + (" (PARTIAL: run still in progress or cut short)" if partial else ""),
+        "mode": mode.name,
+        "mode_settings": mode.__dict__,
+        "machine": machine,
+        "cases": case_info,
+        "peers": peers,
+        "hooks": reg.hooks,
+        "rows": rows,
+        "sections": section_results,
+    }
+    payload["targets"] = targets(payload)
+    payload["total_wall_s"] = time.perf_counter() - t_start
+    jp = _harness.write_json(payload, Path(out_dir) / "latest.json")
+    mp = _harness.write_markdown(payload, Path(out_dir) / "latest.md")
+    return mp, jp
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="reduced grids, 1 repeat, no gradient check (< 60 s)")
-    ap.add_argument("--only", help=f"comma-separated cases (known: {', '.join(CASES)})")
+    ap.add_argument("--only", help=f"comma-separated cases/sections (known: {', '.join([*CASES, *_sections.SECTIONS])})")
     ap.add_argument("--impl", help="comma-separated implementations to run (default: all registered)")
     ap.add_argument("--tmm-full-grid", action="store_true", help="time tmm on the full grid instead of a subset (slow)")
     ap.add_argument("--no-validate", action="store_true", help="skip validating peers against tmm on a random stack")
@@ -62,20 +103,23 @@ def main(argv: list[str] | None = None) -> int:
     cases = _split(a.only)
     impls = _split(a.impl)
     for c in cases or []:
-        if c not in CASES:
-            ap.error(f"unknown case {c!r}; known: {', '.join(CASES)}")
+        if c not in CASES and c not in _sections.SECTIONS:
+            ap.error(f"unknown case {c!r}; known: {', '.join([*CASES, *_sections.SECTIONS])}")
     benches = [b for b in reg.benches if (cases is None or b.case in cases) and (impls is None or b.impl in impls)
                and (b.in_quick or not a.quick)]
+    sections = [s for s in _sections.SECTIONS if (cases is None or s in cases) and impls in (None, ["layerstack_jax"])]
     if a.list:
         for b in reg.benches:
             print(f"{b.key:40s} grid={b.grid or 'full'} quick_grid={b.quick_grid if b.in_quick else '(not in --quick)'}")
         for k, v in reg.hooks.items():
             print(f"hook {k}: {v}")
+        for k, v in _sections.SECTIONS.items():
+            print(f"section {k:12s} {v}")
         return 0
 
     t_start = time.perf_counter()
     command = "python -m benchmarks " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
-    print(f"[benchmarks] mode={mode.name}, {len(benches)} benchmark(s)", flush=True)
+    print(f"[benchmarks] mode={mode.name}, {len(benches)} benchmark(s), sections: {', '.join(sections) or 'none'}", flush=True)
     machine = _harness.machine_info(dtype="float64")
     warn = _harness.busy_warning(machine.get("loadavg_at_start"), machine.get("cpu_count") or 1)
     if warn:
@@ -85,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # 1. validate peers against tmm (one subprocess; a crashing peer cannot take the runner down)
     peers: dict[str, dict] = {}
-    if not a.no_validate and mode.validate_peers:
+    if benches and not a.no_validate and mode.validate_peers:
         names = [p for p in PEERS if impls is None or p in impls or p == "tmm"]
         payload, res = _worker(["validate", "--peers", ",".join(names)], timeout=mode.timeout)
         if payload is None or isinstance(payload.get("status"), str):  # worker-level failure
@@ -127,26 +171,20 @@ def main(argv: list[str] | None = None) -> int:
               + (f"  median {med * 1e3:.3g} ms, first call {row['first_call_s']:.3g} s" if med is not None else "")
               + f"  ({time.perf_counter() - t0:.1f} s)", flush=True)
 
-    case_info = []
-    for name in sorted({b.case for b in benches}):
-        c = get_case(name)
-        case_info.append({"name": name, "description": c.description, "n_points": c.n_points, "shape": c.shape,
-                          "n_layers": c.n_layers, "d_nm": c.d.tolist()})
-    payload = {
-        "command": command,
-        "mode": mode.name,
-        "mode_settings": mode.__dict__,
-        "machine": machine,
-        "cases": case_info,
-        "peers": peers,
-        "hooks": reg.hooks,
-        "rows": rows,
-        "total_wall_s": time.perf_counter() - t_start,
-    }
+    # 3. whole-model sections, each in its own process (its own peak RSS, its own x64 setting)
     out_dir = Path(a.out_dir)
-    jp = _harness.write_json(payload, out_dir / "latest.json")
-    mp = _harness.write_markdown(payload, out_dir / "latest.md")
-    print(f"[benchmarks] wrote {mp} and {jp} in {payload['total_wall_s']:.1f} s", flush=True)
+    section_results: dict[str, dict] = {}
+    for name in sections:
+        t0 = time.perf_counter()
+        res = _run_section(name, a.quick, out_dir)
+        section_results[name] = res
+        _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start, partial=True)
+        print(f"[benchmarks] section {name:10s} {res.get('status')}  ({time.perf_counter() - t0:.1f} s)", flush=True)
+        if res.get("error"):
+            print(res["error"], file=sys.stderr)
+
+    mp, jp = _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_results, t_start)
+    print(f"[benchmarks] wrote {mp} and {jp} in {time.perf_counter() - t_start:.1f} s", flush=True)
     return 0
 
 

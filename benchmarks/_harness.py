@@ -560,11 +560,20 @@ def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "lates
         lines.append("- **WARNING: other processes used > 10% of the CPUs while timing "
                      + ", ".join(f"{r['impl']}/{r['kind']} ({100 * r['foreign_cpu_frac']:.0f}%)" for r in busy_rows)
                      + "; those timings are inflated**")
-    lines += ["", "| " + " | ".join(h for h, _, _ in MD_COLUMNS) + " |", "|" + "---|" * len(MD_COLUMNS)]
-    for row in payload.get("rows", []):
+    if payload.get("targets"):
+        from . import targets as _targets
+
+        lines += ["", "## Targets", "",
+                  "Judged on the minimum over repeats (the least contended estimate on a shared machine).", ""]
+        lines += _targets.markdown(payload["targets"])
+    rows_p1 = payload.get("rows", [])
+    if rows_p1:
+        lines += ["", "## P1 — coherent multilayer, all implementations"]
+        lines += ["", "| " + " | ".join(h for h, _, _ in MD_COLUMNS) + " |", "|" + "---|" * len(MD_COLUMNS)]
+    for row in rows_p1:
         cells = [_md_escape(_fmt(row.get(key), fmt)) for _, key, fmt in MD_COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Times are per call of the whole case (both polarizations) unless the notes say otherwise;",
+    lines += [] if not rows_p1 else ["", "Times are per call of the whole case (both polarizations) unless the notes say otherwise;",
               "`full grid (s)` is the measured median for rows timed on the full grid, else the per-point",
               "cost extrapolated to the full grid. `compile / 1st-call overhead` is trace + lower + XLA",
               "compile when measured ahead-of-time (jitted JAX functions), otherwise first call minus median.",
@@ -593,4 +602,33 @@ def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "lates
         for name, st in hooks.items():
             lines.append(f"- {name}: {st}")
         lines.append("")
+    lines += _sections_markdown(payload.get("sections", {}))
     return _atomic_write(Path(path), "\n".join(lines))
+
+
+SECTION_TITLES = {
+    "P2": "P2 — incoherent layers over a Lambertian background (sphere SCE)",
+    "P3": "P3 — mixed stack: coherent films on an incoherent varnish over a Lambertian background (45°/0°)",
+    "MEMORY": "Memory — 100,000 spectra in chunks",
+    "SCALING": "Scaling — time vs layers, wavelengths, angles, batch",
+    "ACCURACY": "Accuracy vs cost — diffuse-reflectance quadrature",
+    "PRECISION": "float32 vs float64 (CPU)",
+}
+
+
+def _sections_markdown(sections: dict) -> list[str]:
+    from . import _sections
+
+    lines: list[str] = []
+    for name, res in sections.items():
+        lines += [f"## {SECTION_TITLES.get(name, name)}", ""]
+        if res.get("status") != "ok":
+            lines += [f"**{name}: {res.get('status')}**", ""]
+            continue
+        try:
+            lines += _sections.section_module(name).markdown(res)
+        except Exception as e:  # a report bug must not lose the run
+            lines.append(f"(could not render {name}: {type(e).__name__}: {e}; see latest.json)")
+        lines += ["", f"Section process: peak RSS {res.get('peak_rss_bytes', 0) / 2**20:.0f} MiB, "
+                  f"wall {res.get('process_wall_s', 0):.0f} s.", ""]
+    return lines

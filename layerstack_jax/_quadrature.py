@@ -37,6 +37,9 @@ __all__ = ["DEFAULT_NODES", "unit_rule", "hemispherical_rule", "plain_gauss_lege
 #: the benchmarks' accuracy-vs-cost table).
 DEFAULT_NODES = 24
 
+#: Interval below its end point over which a zero-width segment spreads its (zero-weight) nodes.
+_EMPTY_SPREAD = 1e-4
+
 
 @functools.lru_cache(maxsize=None)
 def unit_rule(nodes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +92,16 @@ def hemispherical_rule(n_from, n_thick, nodes: int = DEFAULT_NODES):
     width = (hi - lo)[:, None]
     x = jnp.asarray(x, dtype=width.dtype).reshape((1, -1) + (1,) * len(shape))
     w = jnp.asarray(w, dtype=width.dtype).reshape((1, -1) + (1,) * len(shape))
-    mu = lo[:, None] + width * x
+    # Nodes are laid out downwards from the segment's top and never ON it. A zero-width segment
+    # (traced layout: a split point at 1 for a medium index-matched to n_from, or two equal split
+    # points) spreads its zero-weight nodes over (hi - _EMPTY_SPREAD, hi) instead of stacking them
+    # on hi, where the integrand can be 0/0 (a zero-thickness film between two media with q = 0
+    # at grazing incidence); d(weight)/d(width) then multiplies ~f(hi-), the value the adjacent
+    # segment sees, so the gradient stays finite and close to the one-sided limit.
+    empty = width <= 0
+    spread = jnp.where(empty, _EMPTY_SPREAD, width)
+    top = hi[:, None]
+    mu = jnp.minimum(top - spread * (1.0 - x), top - jnp.abs(top) * jnp.finfo(width.dtype).eps)
     wt = width * w
     return mu.reshape((-1, *shape)), wt.reshape((-1, *shape))
 

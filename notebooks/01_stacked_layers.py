@@ -534,7 +534,7 @@ for k, p in enumerate(patches[:3]):
     (line,) = ax.plot(wl, R_sce[k], label=f"{p}: sphere SCE")
     ax.plot(wl, R_sci[k], ":", color=line.get_color(), label=f"{p}: sphere SCI")
     ax.plot(wl, R_450[k], "--", color=line.get_color(), label=f"{p}: 45°/0°")
-ax.set(xlabel="wavelength (nm)", ylabel="reflectance", title="Varnished paints in three instruments")
+ax.set(xlabel="wavelength (nm)", ylabel="reflectance", title="Varnished paints in three instruments", ylim=(0, 1.12))
 ax.legend(fontsize=7, ncol=3, loc="upper left")
 save(fig, "07_geometries")
 

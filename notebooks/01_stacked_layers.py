@@ -509,7 +509,7 @@ print(f"n_g = 1.5, 45°/0°: R = {R.min():.4f} … {R.max():.4f} for n₁ in [1.
 # The same varnished painting reads differently in different instruments:
 #
 # * sphere, specular excluded (eq. 78): $R = t_{k+1..0}\,\rho_g T(\theta_0)/(1-\rho_g r_{k+1..0})$;
-# * sphere, specular included: the same plus the front reflectance $R_{0..k+1}(\theta_0)$ (≈ 4.6 % here);
+# * sphere, specular included: the same plus the front reflectance $R_{0..k+1}(\theta_0)$ of the stack;
 # * radiance detector 45°/0° (eq. 79): $(n_0/n_g)^2 T(45°)T(0°)\rho_g/(1-\rho_g r_{k+1..0})$.
 #
 # The diffuse parts share the factor $\rho_g/(1-\rho_g r)$: their ratio,
@@ -528,6 +528,7 @@ print(f"45°/0° ÷ SCE over six paints: {ratio[0].min():.4f} … {ratio[0].max(
 assert spread <= 1e-12
 spec = np.asarray(ls.reflectance(aged, wl, ls.Specular(8.0, "R")))
 assert np.abs((R_sci - R_sce) - spec).max() <= 1e-14
+print(f"SCI − SCE = front reflectance of the varnished paint at 8°: {spec.min():.4f} … {spec.max():.4f}")
 
 fig, ax = plt.subplots(figsize=(7, 4))
 for k, p in enumerate(patches[:3]):

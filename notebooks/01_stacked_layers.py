@@ -314,7 +314,7 @@ save(fig, "02_varnished_painting")
 # with $r_{110}$ from eq. 80. We build the print in the library as *any* stack — one incoherent
 # layer over a background that happens to have the same index — and compare with eq. 82 evaluated
 # from the helpers above. The dyes are synthetic Gaussian absorption bands (cyan, magenta,
-# yellow); the paper's ρg is the white patch's, from section 1.
+# yellow); the print paper's ρg is that of the white patch, from section 1.
 
 # %%
 def band(center, width, peak_alpha_h):
@@ -354,7 +354,7 @@ assert np.abs(brdf - R_82 / np.pi).max() <= 1e-10  # eq. 76: BRDF = reflectance 
 # %% [markdown]
 # Williams and Clapper's point was the **density** of a print. A naive model multiplies the
 # paper by the dye's transmittance along the two paths, $D_\text{naive} = D_\text{paper} + \alpha h\,\log_{10}e\,(1/\cos\theta_1 + 1/\cos\theta_1')$;
-# the internal reflections at the gelatin/air interface send light back through the dye again and
+# the internal reflections at the gelatin/air interface send light back through the dye again
 # and again, so the print is denser than that. The gap opens at small dye amounts — light that
 # would have come back after several trips is the first to be absorbed — and then stays nearly
 # constant: at high densities only the direct path is left.
@@ -389,8 +389,8 @@ save(fig, "03_williams_clapper_density")
 #
 # $$R = t_{110}\,\frac{\rho_g T_{01}(\theta_0)\,t_1(\theta_1)}{1-\rho_g r_{110}},$$
 #
-# the Shore–Spoonhower generalisation of Williams–Clapper. With αh = 0 and no layer at all it is
-# the bare paint of section 1 (Saunderson), already checked.
+# the Shore–Spoonhower generalisation of Williams–Clapper. With αh = 0 the index-matched layer
+# disappears and what is left is the bare paint of section 1 (Saunderson): checked below too.
 
 # %%
 def shore_spoonhower(alpha_h, rho, theta0, n0=1.0, n1=1.5):
@@ -471,8 +471,7 @@ save(fig, "05_two_layers")
 # leaving the paint, and raises the reading; a layer of higher index lowers it.
 # Nothing depends on the wavelength here, so we sweep $n_1$ along the wavelength axis: an index
 # given as an array on the grid (`ls.Index(n1_sweep)`) is a per-wavelength index. (Indices are
-# ordinary pytree leaves, so `jax.vmap` over them, or `jax.grad` with respect to them, works
-# too; see the fitting notebook.)
+# ordinary pytree leaves: `jax.vmap` over them and `jax.grad` with respect to them work too.)
 
 # %%
 n1_sweep = np.round(np.linspace(1.2, 2.0, wl.size), 12)  # steps of 0.01: hits 1.4, 1.5, 1.6 exactly

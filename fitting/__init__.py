@@ -12,7 +12,10 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._results` — :class:`FitResult` (values, standard errors, covariance,
   identifiability, report, JSON, plot);
 * :mod:`fitting._batch` — :func:`fit_batch` (many independent fits in one compiled, chunked,
-  vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ)).
+  vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ));
+* :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
+  :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
+  thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`).
 
 The forward model is always the public :func:`layerstack_jax.reflectance`; fitting never reaches
 inside it. Units: nm, 1/nm, degrees in geometries, as in :mod:`layerstack_jax`.
@@ -22,6 +25,19 @@ from ._batch import BatchResult as BatchResult
 from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
+from ._design import ColourTarget as ColourTarget
+from ._design import DesignResult as DesignResult
+from ._design import NeedleScan as NeedleScan
+from ._design import RobustSpec as RobustSpec
+from ._design import SpectralTarget as SpectralTarget
+from ._design import YieldResult as YieldResult
+from ._design import insert_needle as insert_needle
+from ._design import merit as merit
+from ._design import needle_design as needle_design
+from ._design import needle_function as needle_function
+from ._design import optimize_thicknesses as optimize_thicknesses
+from ._design import thickness_yield as thickness_yield
+from ._design import with_thicknesses as with_thicknesses
 from ._objective import Dataset as Dataset
 from ._objective import Objective as Objective
 from ._objective import resample as resample
@@ -54,4 +70,17 @@ __all__ = [
     "FitResult",
     "METHODS",
     "fit",
+    "ColourTarget",
+    "DesignResult",
+    "NeedleScan",
+    "RobustSpec",
+    "SpectralTarget",
+    "YieldResult",
+    "insert_needle",
+    "merit",
+    "needle_design",
+    "needle_function",
+    "optimize_thicknesses",
+    "thickness_yield",
+    "with_thicknesses",
 ]

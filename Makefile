@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench install clean
+.PHONY: demo test test-slow bench notebooks docs install clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -16,6 +16,9 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	mkdir -p out
+	# main job: fit the shipped (synthetic, labelled) calibration series of a varnish over a red paint
+	$(PY) examples/fit_calibration_series.py
+	$(PY) -m layerstack_jax.cli fit examples/calibration_fit.toml examples/calibration_series.csv -g 45/0 --columns h10um,h20um,h40um,h80um --sigma 0.002 -o out/calibration_fit.json --plot out/calibration_fit.png
 	$(PY) -m layerstack_jax.cli predict examples/varnished_painting.toml --wavelengths 380:780:5 --geometry 45/0 -o out/varnished_painting_45-0.csv --plot out/varnished_painting_45-0.png
 	$(PY) -m layerstack_jax.cli predict examples/thin_film_on_metal.toml --wavelengths 380:780:5 --geometry specular:30 -o out/thin_film_on_metal.csv --plot out/thin_film_on_metal.png
 
@@ -30,7 +33,13 @@ bench: $(STAMP)
 	$(PY) -m pip install -q torch==2.13.0 && $(PY) -m pip install -q --no-deps tmm-fast || echo "tmm-fast unavailable: reported as missing"
 	$(PY) -m pip install -q tmm-faster jaxlayerlumos || echo "some peers unavailable: reported as missing"
 	$(PY) -m benchmarks
-	$(PY) -m benchmarks.radiometric
+	$(PY) -m benchmarks.fitting_cases
+
+notebooks: $(STAMP)
+	$(PY) notebooks/render.py
+
+docs: $(STAMP)
+	$(PY) docs/make_api.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

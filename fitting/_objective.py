@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, Geometry, LayerstackError, Stack, reflectance
+from layerstack_jax import DEFAULT_NODES, Ellipsometric, Geometry, LayerstackError, Stack, reflectance
 from layerstack_jax._geometry import BRDF, Directional, Specular, Sphere
 
 from ._parameters import Layout, Parameter, resolve_parameter
@@ -45,7 +45,17 @@ def _geometry_label(g: Geometry) -> str:
         return f"{float(g.incidence_deg):g}/{float(g.viewing_deg):g}"
     if isinstance(g, Specular):
         return f"specular:{float(g.angle_deg):g}:{g.quantity}"
+    if isinstance(g, Ellipsometric):
+        return f"ellipsometry:{float(g.angle_deg):g}:{g.quantity}"
     return type(g).__name__
+
+
+def _measure(stack: Stack, grid, g: Geometry, nodes: int):
+    """What the instrument of geometry ``g`` reads: ψ/Δ for an ellipsometer, else
+    :func:`layerstack_jax.reflectance`."""
+    if isinstance(g, Ellipsometric):
+        return g.measure(stack, grid)
+    return reflectance(stack, grid, g, nodes=nodes)
 
 
 def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarray:
@@ -159,7 +169,7 @@ def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int
         raise LayerstackError(
             f"{label}: NaN or infinite data at sample {s}, {wl_data[j]:g} nm; mask missing points (mask=False)"
         )
-    neg = used & (y < 0)
+    neg = used & (y < 0) & (not isinstance(ds.geometry, Ellipsometric))  # Δ, C, S may be < 0
     if np.any(neg):
         s, j = np.argwhere(neg)[0]
         raise LayerstackError(
@@ -301,7 +311,7 @@ class Objective:
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            return tuple(reflectance(st, grid, g, nodes=nodes) for g in geometries)
+            return tuple(_measure(st, grid, g, nodes) for g in geometries)
 
         if any(per):
             out = jax.vmap(one)(own)

@@ -23,6 +23,7 @@ from ._database import DatabaseFormula as DatabaseFormula
 from ._database import database_version as database_version
 from ._database import material as material
 from ._database import material_sources as material_sources
+from ._ellipsometry import Ellipsometric as Ellipsometric
 from ._ellipsometry import Ellipsometry as Ellipsometry
 from ._ellipsometry import ellipsometry as ellipsometry
 from ._ellipsometry import psi_delta as psi_delta

@@ -40,7 +40,10 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+import equinox as eqx
+
 from ._coherent import packet_amplitudes
+from ._geometry import Geometry
 from ._custom_types import Array, Complex, Float, RealLike
 from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
@@ -166,3 +169,28 @@ def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsomet
     r_s, r_p = reflection_amplitudes(stack, wavelength_nm, angle_deg)
     psi, delta = psi_delta(r_s, r_p)
     return Ellipsometry(jnp.rad2deg(psi), jnp.rad2deg(delta), r_p / r_s)
+
+
+class Ellipsometric(Geometry):
+    """An ellipsometer's reading at ``angle_deg`` (degrees), as a measurement geometry: lets
+    ψ/Δ spectra be fitted (``fitting.Dataset(Ellipsometric(70, "psi"), data)``).
+
+    ``quantity``: ``'psi'`` or ``'delta'`` (degrees, conventions of :func:`ellipsometry`), or the
+    wrap-free ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (better fitting
+    targets: Δ jumps at ±180°).
+    """
+
+    angle_deg: object = 70.0
+    quantity: str = eqx.field(static=True, default="psi")
+
+    def __check_init__(self):
+        if self.quantity not in ("psi", "delta", "N", "C", "S"):
+            raise LayerstackError(
+                f"Ellipsometric.quantity must be 'psi', 'delta', 'N', 'C' or 'S', got {self.quantity!r}"
+            )
+        _check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
+
+    def measure(self, stack: Stack, wavelength_nm) -> Float[Array, "*angle wl"]:
+        """The quantity read for ``stack`` on ``wavelength_nm`` (nm)."""
+        e = ellipsometry(stack, wavelength_nm, self.angle_deg)
+        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]

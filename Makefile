@@ -34,6 +34,7 @@ bench: $(STAMP)
 	$(PY) -m pip install -q tmm-faster jaxlayerlumos || echo "some peers unavailable: reported as missing"
 	$(PY) -m benchmarks
 	$(PY) -m benchmarks.fitting_cases
+	$(PY) -m benchmarks.design_case
 
 notebooks: $(STAMP)
 	$(PY) notebooks/render.py

@@ -103,3 +103,10 @@ def test_targets_judgement():
     assert t["compile: P1 forward"] is False
     assert t["P2 forward throughput"] is None  # not run: never reported as met
     assert "**NO**" in "\n".join(targets.markdown(targets.targets({"rows": rows, "sections": {}})))
+
+
+def test_design_case_runs_on_a_tiny_grid(capsys):
+    from benchmarks import design_case
+
+    assert design_case.main(["--repeats", "1", "--wavelengths", "8", "--angles", "2"]) == 0
+    assert "gradient / value" in capsys.readouterr().out

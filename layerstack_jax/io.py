@@ -185,6 +185,26 @@ def _check_range(where: _Where, key: str, values: np.ndarray, what: str, lo=None
 
 
 # --------------------------------------------------------------------------------- CSV
+def _numeric_rows(path, lines, names) -> np.ndarray:
+    """Data rows ``[(line_no, text), …]`` of a CSV as a ``(rows, len(names))`` float array; every
+    problem raises :class:`LayerstackError` naming the file and line."""
+    rows = []
+    for line_no, line in lines:
+        fields = [f.strip() for f in line.split(",")]
+        if len(fields) != len(names):
+            raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns ({', '.join(names)})")
+        try:
+            row = [float(f) for f in fields]
+        except ValueError:
+            raise LayerstackError(f"{path}: line {line_no}: not a number in {line!r}") from None
+        if not all(math.isfinite(v) for v in row):
+            raise LayerstackError(f"{path}: line {line_no}: NaN or infinite value in {line!r}")
+        rows.append(row)
+    if not rows:
+        raise LayerstackError(f"{path}: no data rows after the header")
+    return np.asarray(rows, dtype=float)
+
+
 def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()) -> dict[str, np.ndarray]:
     """Read a numeric CSV file with a header row into ``{column: float array}``.
 
@@ -228,21 +248,7 @@ def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()
     for name in required:
         if name not in names:
             raise LayerstackError(f"{path}: line {header_line}: missing column {name!r}; expected columns {expected}")
-    rows = []
-    for line_no, line in lines[1:]:
-        fields = [f.strip() for f in line.split(",")]
-        if len(fields) != len(names):
-            raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns ({', '.join(names)})")
-        try:
-            row = [float(f) for f in fields]
-        except ValueError:
-            raise LayerstackError(f"{path}: line {line_no}: not a number in {line!r}") from None
-        if not all(math.isfinite(v) for v in row):
-            raise LayerstackError(f"{path}: line {line_no}: NaN or infinite value in {line!r}")
-        rows.append(row)
-    if not rows:
-        raise LayerstackError(f"{path}: no data rows after the header")
-    data = np.asarray(rows, dtype=float)
+    data = _numeric_rows(path, lines[1:], names)
     return {name: data[:, j] for j, name in enumerate(names)}
 
 
@@ -276,21 +282,7 @@ def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
             raise LayerstackError(f"{path}: line {header_line}: empty column name")
         if names.count(n) > 1:
             raise LayerstackError(f"{path}: line {header_line}: column {n!r} appears twice")
-    rows = []
-    for line_no, line in lines[1:]:
-        fields = [f.strip() for f in line.split(",")]
-        if len(fields) != len(names):
-            raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns")
-        try:
-            row = [float(f) for f in fields]
-        except ValueError:
-            raise LayerstackError(f"{path}: line {line_no}: not a number in {line!r}") from None
-        if not all(math.isfinite(v) for v in row):
-            raise LayerstackError(f"{path}: line {line_no}: NaN or infinite value in {line!r}")
-        rows.append(row)
-    if not rows:
-        raise LayerstackError(f"{path}: no data rows after the header")
-    data = np.asarray(rows, dtype=float)
+    data = _numeric_rows(path, lines[1:], names)
     wl = data[:, 0]
     if np.any(wl <= 0) or np.any(np.diff(wl) <= 0):
         raise LayerstackError(f"{path}: wavelength_nm must be > 0 and increase strictly")

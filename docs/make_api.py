@@ -146,7 +146,8 @@ def entry(name: str, gaps: list[str]) -> list[str]:
     module = getattr(obj, "__module__", None) or "layerstack_jax"
     lines = [f"### `{name}`", ""]
     if k == "constant":
-        lines += [f"*constant* `{name} = {obj!r}` — defined in `{_constant_module(name)}`", ""]
+        module = ".".join(_constant_source(name).relative_to(ROOT).with_suffix("").parts)
+        lines += [f"*constant* `{name} = {obj!r}` — defined in `{module}`", ""]
         doc = _constant_doc(name)
     else:
         lines += [f"*{k}*, defined in `{module}`", "", "```python", f"{name}{signature(obj)}", "```", ""]
@@ -179,17 +180,19 @@ _NO_UNITS_EXPECTED = {"LayerstackError", "Geometry", "Material", "parse_geometry
                       "stack_to_dict", "DEFAULT_NODES", "Stack"}
 
 
-def _constant_module(name: str) -> str:
-    return {"DEFAULT_NODES": "layerstack_jax._quadrature"}.get(name, "layerstack_jax")
+def _constant_source(name: str) -> Path:
+    """The private module that defines the constant ``name`` (``NAME = …`` at top level)."""
+    for path in sorted((ROOT / "layerstack_jax").glob("*.py")):
+        if any(line.startswith(f"{name} =") or line.startswith(f"{name}:") for line in path.read_text(encoding="utf-8").splitlines()):
+            return path
+    raise LookupError(f"no module of layerstack_jax defines {name}")
 
 
 def _constant_doc(name: str) -> str:
     """The ``#:`` comment block above a module-level constant."""
-    module = _constant_module(name)
-    path = ROOT / Path(*module.split(".")).with_suffix(".py")
-    lines = path.read_text(encoding="utf-8").splitlines()
+    lines = _constant_source(name).read_text(encoding="utf-8").splitlines()
     for i, line in enumerate(lines):
-        if line.startswith(f"{name} ="):
+        if line.startswith(f"{name} =") or line.startswith(f"{name}:"):
             doc = []
             j = i - 1
             while j >= 0 and lines[j].startswith("#:"):

@@ -57,17 +57,21 @@ def beer_attenuation(n, q, thickness, alpha, wavelength):
 def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIntensities:
     """Compose two interfaces around a thick layer of single-pass attenuation ``t``.
 
+    ``above`` and ``below`` are any 4-field tuples ``(R_front, T_front, R_back, T_back)`` of the
+    same type (intensities, or the s–p correlations of the polarimetry module); so is the result.
+
     The adding rule of the module docstring (Simonot eqs. 51, 53 and their mirror images).
     All arguments broadcast; the polarization axis is carried along unchanged.
     """
     t2 = t * t
     den = 1.0 - above.R_back * below.R_front * t2
     # den -> 0 only for a lossless cavity between two perfect mirrors (R = 1 on both sides with
-    # t = 1), where no light enters: the numerators vanish as well.
-    ok = den > 0
+    # t = 1), where no light enters: the numerators vanish as well. (`!= 0` rather than `> 0`
+    # so that the same rule serves complex s–p correlations, :mod:`layerstack_jax._polarimetry`.)
+    ok = den != 0
     inv = jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
     R_f = above.R_front + above.T_front * above.T_back * below.R_front * t2 * inv
     T_f = above.T_front * below.T_front * t * inv
     R_b = below.R_back + below.T_back * below.T_front * above.R_back * t2 * inv
     T_b = below.T_back * above.T_back * t * inv
-    return PacketIntensities(R_f, T_f, R_b, T_b)
+    return type(above)(R_f, T_f, R_b, T_b)

@@ -58,7 +58,7 @@ from ._custom_types import Array, Float, RealLike
 from ._ellipsometry import _check_angle_deg
 from ._fresnel import normal_wavevector, power_flux, safe_divide
 from ._geometry import _diffuse_resolved
-from ._incoherent import beer_attenuation
+from ._incoherent import add_layer, beer_attenuation
 from ._quadrature import DEFAULT_NODES
 from ._response import stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
@@ -223,19 +223,6 @@ def _packet_correlations(n, d, s, wl, both_sides: bool) -> _Correlations:
     return _Correlations(R_f, T_f, _triple(gamma_b[0], gamma_b[1]), _triple(tau_b[0], tau_b[1], fb[0], fb[1]))
 
 
-def _add_layer_correlations(above: _Correlations, below: _Correlations, t) -> _Correlations:
-    """Simonot's adding rule (eqs. 51, 53) applied to each of the three correlations."""
-    t2 = t * t
-    den = 1.0 - above.R_back * below.R_front * t2
-    ok = den != 0
-    inv = jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
-    R_f = above.R_front + above.T_front * above.T_back * below.R_front * t2 * inv
-    T_f = above.T_front * below.T_front * t * inv
-    R_b = below.R_back + below.T_back * below.T_front * above.R_back * t2 * inv
-    T_b = below.T_back * above.T_back * t * inv
-    return _Correlations(R_f, T_f, R_b, T_b)
-
-
 def _front_reflection_correlations(rs: ResolvedStack, s):
     """``(R_s, R_p, X)`` of the front reflection, shaped ``(3, *B)`` (complex dtype)."""
     wl = rs.wavelength
@@ -249,7 +236,7 @@ def _front_reflection_correlations(rs: ResolvedStack, s):
             continue
         n_a = rs.n[a]
         t = beer_attenuation(n_a, normal_wavevector(n_a, s), rs.d[a - 1], rs.alpha[a - 1], wl)
-        total = _add_layer_correlations(total, packet, t)
+        total = add_layer(total, packet, t)
     return total.R_front
 
 

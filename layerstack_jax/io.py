@@ -185,6 +185,18 @@ def _check_range(where: _Where, key: str, values: np.ndarray, what: str, lo=None
 
 
 # --------------------------------------------------------------------------------- CSV
+def _content_lines(path: Path) -> list[tuple[int, str]]:
+    """``[(line number, stripped text)]`` of a text file, blank and ``#`` lines dropped."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read: {e}") from None
+    lines = [(i + 1, line.strip()) for i, line in enumerate(text.splitlines())]
+    return [(i, line) for i, line in lines if line and not line.startswith("#")]
+
+
 def _numeric_rows(path, lines, names) -> np.ndarray:
     """Data rows ``[(line_no, text), …]`` of a CSV as a ``(rows, len(names))`` float array; every
     problem raises :class:`LayerstackError` naming the file and line."""
@@ -218,14 +230,7 @@ def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()
     required = [c.lower() for c in required]
     optional = [c.lower() for c in optional]
     expected = ", ".join(required + [f"[{c}]" for c in optional])
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise LayerstackError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LayerstackError(f"{path}: cannot read: {e}") from None
-    lines = [(i + 1, line.strip()) for i, line in enumerate(text.splitlines())]
-    lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
+    lines = _content_lines(path)
     if not lines:
         raise LayerstackError(f"{path}: empty file (expected a header row {expected} and data rows)")
     header_line, header = lines[0]
@@ -261,14 +266,7 @@ def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     a short or non-numeric row, NaN, or wavelengths that do not increase strictly.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise LayerstackError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LayerstackError(f"{path}: cannot read: {e}") from None
-    lines = [(i + 1, line.strip()) for i, line in enumerate(text.splitlines())]
-    lines = [(i, line) for i, line in lines if line and not line.startswith("#")]
+    lines = _content_lines(path)
     if not lines:
         raise LayerstackError(f"{path}: empty file (expected a header wavelength_nm,<spectrum names…> and data rows)")
     header_line, header = lines[0]

@@ -149,7 +149,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     outs = []
     for c in range(n_chunks):
         sl = slice(c * chunk, (c + 1) * chunk)
-        out = fn(y0, (tuple(y[sl] for y in ys), tuple(w[sl] for w in ws)))
+        out = fn(y0, (tuple(y[sl] for y in ys), tuple(w[sl] for w in ws)), objective.optics)
         outs.append(jax.tree.map(np.asarray, out))
         if report is not None:
             report(min((c + 1) * chunk, n), n)

@@ -28,7 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, Ellipsometric, Geometry, LayerstackError, Stack, reflectance
+from layerstack_jax import (DEFAULT_NODES, Ellipsometric, Geometry, LambertianBackground, LayerstackError, Stack,
+                            fixed_optics, reflectance)
 from layerstack_jax._geometry import BRDF, Directional, Specular, Sphere
 
 from ._parameters import Layout, Parameter, resolve_parameter
@@ -50,12 +51,20 @@ def _geometry_label(g: Geometry) -> str:
     return type(g).__name__
 
 
-def _measure(stack: Stack, grid, g: Geometry, nodes: int):
+def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None):
     """What the instrument of geometry ``g`` reads: ψ/Δ for an ellipsometer, else
-    :func:`layerstack_jax.reflectance`."""
+    :func:`layerstack_jax.reflectance` (reusing ``optics``, a :class:`layerstack_jax.Optics`, if given)."""
     if isinstance(g, Ellipsometric):
         return g.measure(stack, grid)
-    return reflectance(stack, grid, g, nodes=nodes)
+    return reflectance(stack, grid, g, nodes=nodes, optics=optics)
+
+
+def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
+    """True if a free leaf at ``path`` leaves the :class:`layerstack_jax.Optics` unchanged: the
+    thickness or α of a thick (incoherent) layer, or the background's ρg."""
+    if path[:1] == ("layers",) and len(path) == 3:
+        return path[2] == "alpha" or (path[2] == "thickness" and not stack.layers[path[1]].coherent)
+    return path == ("exit", "reflectance") and isinstance(stack.exit, LambertianBackground)
 
 
 def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarray:
@@ -232,11 +241,30 @@ class Objective:
         self._mask = tuple(np.asarray(m) for _, _, m in prepared)
         self.sigma_given = all(ds.sigma is not None for ds in datasets)
         self.n_points = int(sum(m.sum() for m in self._mask))
+        self.optics = self._fixed_optics()
         # check once, eagerly, that the forward model runs on the grid (tables cover it, …)
         try:  # traced once, not run: static checks (tables cover the grid, shapes) happen at trace time
             jax.eval_shape(self.predict, jnp.asarray(self.layout.x0))
         except LayerstackError as e:
             raise LayerstackError(f"model at the starting values: {e}") from None
+
+    def _fixed_optics(self):
+        """Per dataset, the :func:`layerstack_jax.fixed_optics` of the template stack when no
+        free parameter changes it (only thick-layer thicknesses, α, ρg are free), else None.
+        Computed once, eagerly, so the critical angles are known and empty quadrature segments
+        are dropped; the solvers then redo only Beer's law and the adding rule at each step."""
+        if not all(_leaves_optics_fixed(self.stack, p.path) for p in self.layout.params):
+            return None
+        out = []
+        for ds in self.datasets:
+            if isinstance(ds.geometry, Ellipsometric):
+                out.append(None)
+            else:
+                try:
+                    out.append(fixed_optics(self.stack, self.wavelength, ds.geometry, nodes=self.nodes))
+                except LayerstackError as e:
+                    raise LayerstackError(f"dataset {ds.label}: {e}") from None
+        return tuple(out)
 
     # ----------------------------------------------------------------- data
     def args(self, data=None):
@@ -298,8 +326,11 @@ class Objective:
         """The template stack with the parameters ``x`` put in, for ``sample``."""
         return self.layout.inject(self.stack, self.layout.split(jnp.asarray(x)), sample)
 
-    def predict(self, x) -> tuple:
-        """Model spectra for physical parameters ``x``: one ``(samples, wl)`` array per dataset."""
+    def predict(self, x, optics=None) -> tuple:
+        """Model spectra for physical parameters ``x``: one ``(samples, wl)`` array per dataset.
+
+        ``optics``: :attr:`optics` (the solvers pass it as an argument of their compiled
+        functions rather than as a constant); None recomputes everything."""
         coefficients = self.layout.split(x)
         per = [p.per_sample for p in self.layout.params]
         shared = [None if ps else c for c, ps in zip(coefficients, per)]
@@ -311,7 +342,7 @@ class Objective:
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            return tuple(_measure(st, grid, g, nodes) for g in geometries)
+            return tuple(_measure(st, grid, g, nodes, o) for g, o in zip(geometries, optics or (None,) * len(geometries)))
 
         if any(per):
             out = jax.vmap(one)(own)
@@ -330,14 +361,14 @@ class Objective:
                 out.append((jnp.sqrt(mu) * (v[..., 2:] - 2 * v[..., 1:-1] + v[..., :-2])).ravel())
         return jnp.concatenate(out) if out else jnp.zeros((0,), dtype=x.dtype)
 
-    def weighted_residuals(self, x, args):
+    def weighted_residuals(self, x, args, optics=None):
         """Data residuals ``w (f − y)`` per dataset, ``(samples, wl)`` each (0 at masked points)."""
         data, weight = args
-        return tuple(w * (f - y) for f, y, w in zip(self.predict(x), data, weight))
+        return tuple(w * (f - y) for f, y, w in zip(self.predict(x, optics), data, weight))
 
-    def residuals(self, x, args):
+    def residuals(self, x, args, optics=None):
         """Flat residual vector: weighted data residuals, then smoothness penalties."""
-        parts = [r.ravel() for r in self.weighted_residuals(x, args)]
+        parts = [r.ravel() for r in self.weighted_residuals(x, args, optics)]
         return jnp.concatenate(parts + [self.penalty(x)])
 
     @property

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.custom_derivatives import SymbolicZero
 
 from layerstack_jax import LayerstackError
 
@@ -93,7 +94,8 @@ def _cache(objective: Objective) -> dict:
 
 
 def _solve_function(objective: Objective, o: SolverOptions):
-    """Pure ``(start, args) -> (x, steps, code)``; ``start`` is ``u`` (optimistix) or ``z`` (L-BFGS-B)."""
+    """Pure ``(start, args, optics) -> (x, steps, code)``; ``start`` is ``u`` (optimistix) or ``z``
+    (L-BFGS-B); ``optics`` the objective's fixed optics (or None)."""
     layout = objective.layout
     if o.method == "lbfgsb":
         import jaxopt
@@ -102,14 +104,14 @@ def _solve_function(objective: Objective, o: SolverOptions):
         lower = jnp.asarray(layout.lower / layout.scale)
         upper = jnp.asarray(layout.upper / layout.scale)
 
-        def cost(z, args):
-            r = objective.residuals(z * scale, args)
+        def cost(z, args_optics):
+            r = objective.residuals(z * scale, *args_optics)
             return 0.5 * jnp.sum(r * r)
 
         solver = jaxopt.LBFGSB(fun=cost, maxiter=o.max_steps, tol=o.gtol, jit=True)
 
-        def solve(z0, args):
-            out = solver.run(z0, bounds=(lower, upper), args=args)
+        def solve(z0, args, optics):
+            out = solver.run(z0, bounds=(lower, upper), args_optics=(args, optics))
             z, state = out.params, out.state
             finite = jnp.all(jnp.isfinite(z)) & jnp.isfinite(state.value)
             ok = state.error <= o.gtol
@@ -121,21 +123,56 @@ def _solve_function(objective: Objective, o: SolverOptions):
 
     solver = _optx_solver(o)
 
-    def fn(u, args):
-        return objective.residuals(layout.to_physical(u), args)
+    def residuals(u, args_optics):
+        return objective.residuals(layout.to_physical(u), *args_optics)
 
-    def solve(u0, args):
+    # Least squares: optimistix linearises the residuals at every step and then materialises
+    # and transposes that linear map several times (QR of the damped system, gradient, trust
+    # region); with the Jacobian materialised once per step by forward mode, all of those are
+    # small dense products. BFGS needs only the gradient: plain reverse mode.
+    fn = residuals if o.method == "bfgs" else dense_jacobian(residuals)
+
+    def solve(u0, args, optics):
         if o.method == "bfgs":
-            sol = optx.minimise(lambda u, a: 0.5 * jnp.sum(fn(u, a) ** 2), solver, u0, args=args,
+            sol = optx.minimise(lambda u, a: 0.5 * jnp.sum(fn(u, a) ** 2), solver, u0, args=(args, optics),
                                 max_steps=o.max_steps, throw=False)
         else:
-            sol = optx.least_squares(fn, solver, u0, args=args, max_steps=o.max_steps, throw=False)
+            sol = optx.least_squares(fn, solver, u0, args=(args, optics), max_steps=o.max_steps, throw=False)
         x = layout.to_physical(sol.value)
         code = sol.result._value
         code = jnp.where(jnp.all(jnp.isfinite(x)), code, _LBFGSB_CODES["nonfinite"])
         return x, sol.stats["num_steps"], code
 
     return solve
+
+
+def dense_jacobian(fn):
+    r"""``fn(u, args) -> r`` (``u`` of shape ``(P,)``, ``r`` of shape ``(M,)``) with the same
+    values and a JVP rule that materialises the Jacobian :math:`J = \partial r/\partial u` once,
+    by forward mode (one primal pass and P tangents, ``jax.jacfwd``), and applies it as the
+    dense product :math:`J\,\delta u`. Linearising it (``jax.linearize``) thus costs one
+    ``jacfwd``; materialising or transposing the linear map afterwards costs a matrix product
+    instead of further passes through the model. Tangents of ``args`` (never used by the
+    solvers) are propagated exactly by a separate JVP."""
+
+    @jax.custom_jvp
+    def g(u, args):
+        return fn(u, args)
+
+    def g_jvp(primals, tangents):
+        u, args = primals
+        du, dargs = tangents
+        J, r = jax.jacfwd(lambda v: (fn(v, args), fn(v, args)), has_aux=True)(u)
+        out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ du
+        if not all(isinstance(t, SymbolicZero) for t in jax.tree.leaves(
+                dargs, is_leaf=lambda t: isinstance(t, SymbolicZero))):
+            dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if isinstance(t, SymbolicZero) else t, dargs, args,
+                                 is_leaf=lambda t: isinstance(t, SymbolicZero))
+            out = out + jax.jvp(lambda a: fn(u, a), (args,), (dargs,))[1]
+        return r, out
+
+    g.defjvp(g_jvp, symbolic_zeros=True)
+    return g
 
 
 def starting_point(objective: Objective, o: SolverOptions, x0) -> np.ndarray:
@@ -147,43 +184,64 @@ def starting_point(objective: Objective, o: SolverOptions, x0) -> np.ndarray:
 
 
 def _statistics_function(objective: Objective):
-    """Pure ``(x, args) -> (model spectra, weighted data residuals, penalty, J)``, J the
+    """Pure ``(x, args, optics) -> (model spectra, weighted data residuals, penalty, J)``, J the
     Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units)."""
     scale = jnp.asarray(objective.layout.scale)
 
-    def residuals_and_parts(z, args):
+    def residuals_and_parts(z, args, optics):
         data, weight = args
         x = z * scale
-        model = objective.predict(x)
+        model = objective.predict(x, optics)
         res = tuple(w * (f - y) for f, y, w in zip(model, data, weight))
         pen = objective.penalty(x)
         flat = jnp.concatenate([r.ravel() for r in res] + [pen])
         return flat, (model, res, pen)
 
-    def stats(x, args):
+    def stats(x, args, optics):
         # one forward pass shared by the model, the residuals and the Jacobian
-        J, (model, res, pen) = jax.jacfwd(lambda z: residuals_and_parts(z, args), has_aux=True)(x / scale)
+        J, (model, res, pen) = jax.jacfwd(lambda z: residuals_and_parts(z, args, optics), has_aux=True)(x / scale)
         return model, res, pen, J
 
     return stats
 
 
-def compiled_fit(objective: Objective, o: SolverOptions, batched: bool):
-    """The jitted ``(start, args) -> (x, steps, code, model, residuals, penalty, J)`` of
+#: Fits per vmapped block inside a batched solve (``jax.lax.map``): small blocks keep the
+#: working set in cache and let each block stop as soon as its own fits have converged.
+BLOCK = 4
+
+
+def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: int = BLOCK):
+    """The jitted ``(start, args, optics) -> (x, steps, code, model, residuals, penalty, J)`` of
     ``objective`` for options ``o`` — solve, then the statistics at the solution, in one
-    compiled function — vmapped over a leading axis of start and args when ``batched``.
-    Compiled once per objective, options and batching; cached on the objective."""
-    key = ("fit", o, batched)
+    compiled function. When ``batched``, start and args carry a leading axis of fits, solved
+    ``block`` at a time (vmapped) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
+    :attr:`Objective.optics`) is shared. Compiled once per objective, options and batching;
+    cached on the objective."""
+    key = ("fit", o, batched, block if batched else None)
     cache = _cache(objective)
     if key not in cache:
         solve = _solve_function(objective, o)
         stats = _statistics_function(objective)
 
-        def run(start, args):
-            x, steps, code = solve(start, args)
-            return (x, steps, code) + tuple(stats(x, args))
+        def run(start, args, optics):
+            x, steps, code = solve(start, args, optics)
+            return (x, steps, code) + tuple(stats(x, args, optics))
 
-        cache[key] = jax.jit(jax.vmap(run) if batched else run)
+        if batched:
+            def run_all(starts, args, optics):
+                n = starts.shape[0]
+                b = min(block, n)
+                pad = -n % b
+                nb = (n + pad) // b
+                blocks = jax.tree.map(  # (n_blocks, b, ...): the last block padded with copies of fit 0
+                    lambda a: jnp.concatenate([a, jnp.broadcast_to(a[:1], (pad,) + a.shape[1:])]).reshape(
+                        (nb, b) + a.shape[1:]), (starts, args))
+                out = jax.lax.map(jax.vmap(lambda sa: run(sa[0], sa[1], optics)), blocks)
+                return jax.tree.map(lambda a: a.reshape((nb * b,) + a.shape[2:])[:n], out)
+
+            cache[key] = jax.jit(run_all)
+        else:
+            cache[key] = jax.jit(run)
     return cache[key]
 
 
@@ -247,14 +305,14 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         raise LayerstackError(f"x0 must have {objective.n_parameters} values, got shape {x_start.shape}")
     if starts == 1:
         y0 = jnp.asarray(starting_point(objective, o, x_start))
-        out = compiled_fit(objective, o, batched=False)(y0, args)
+        out = compiled_fit(objective, o, batched=False)(y0, args, objective.optics)
         n_starts_converged = None
     else:
         pts = multistart_points(objective, starts, seed)
         pts[0] = x_start
         y0 = jnp.asarray(starting_point(objective, o, pts))
         bargs = jax.tree.map(lambda a: jnp.broadcast_to(a, (starts,) + a.shape), args)
-        outs = compiled_fit(objective, o, batched=True)(y0, bargs)
+        outs = compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics)
         codes = np.asarray(outs[2])
         cost = np.asarray(sum(jnp.sum(r**2, axis=(-2, -1)) for r in outs[4]) + jnp.sum(outs[5] ** 2, axis=-1))
         ok = (codes == 0) & np.isfinite(cost)

@@ -34,10 +34,12 @@ from ._geometry import BRDF as BRDF
 from ._geometry import Diffuse as Diffuse
 from ._geometry import Directional as Directional
 from ._geometry import Geometry as Geometry
+from ._geometry import Optics as Optics
 from ._geometry import Response as Response
 from ._geometry import Specular as Specular
 from ._geometry import Sphere as Sphere
 from ._geometry import diffuse as diffuse
+from ._geometry import fixed_optics as fixed_optics
 from ._geometry import invert_background as invert_background
 from ._geometry import parse_geometry as parse_geometry
 from ._geometry import reflectance as reflectance

@@ -12,14 +12,14 @@ Angles are degrees in geometry objects and radians in :func:`specular`; waveleng
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ._quadrature import DEFAULT_NODES, hemispherical_rule
-from ._response import natural, stack_intensities
+from ._response import Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
@@ -36,6 +36,8 @@ __all__ = [
     "diffuse",
     "reflectance",
     "invert_background",
+    "Optics",
+    "fixed_optics",
 ]
 
 
@@ -94,7 +96,9 @@ def specular(stack: Stack, wavelength_nm, angle_rad, *, both_sides: bool = True)
     return Response(*(_to_public(x) for x in out))
 
 
-def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
+def _hemisphere(rs: ResolvedStack, side: str, nodes: int):
+    """Snell invariants ``s`` and weights ``w`` (``(node, wl)`` or ``(node, 1)``) of the
+    hemispherical rule seen from the ambient (``side='front'``) or the exit medium ('back')."""
     # Split at the critical angle of every other medium. Thin films add no branch point (their
     # response is even in their own q) but a sharp frustrated-TIR feature there, so they count too.
     if side == "front":
@@ -106,10 +110,18 @@ def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
     # at least (1,) so that the node axis stays in front of the wavelength axis
     n_from = np.atleast_1d(np.real(n_from)) if is_concrete(n_from) else jnp.atleast_1d(jnp.real(n_from))
     mu, w = hemispherical_rule(n_from, others, nodes)
-    s = jnp.real(jnp.asarray(n_from)) * jnp.sqrt(mu)
-    out = stack_intensities(rs, s, both_sides=(side == "back"))
+    return jnp.real(jnp.asarray(n_from)) * jnp.sqrt(mu), w
+
+
+def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w) -> Diffuse:
+    out = join_interfaces(rs, interfaces, both_sides=(side == "back"))
     R, T = (out.R_front, out.T_front) if side == "front" else (out.R_back, out.T_back)
     return Diffuse(jnp.sum(w * natural(R), axis=0), jnp.sum(w * natural(T), axis=0))
+
+
+def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
+    s, w = _hemisphere(rs, side, nodes)
+    return _diffuse_joined(rs, side, stack_interfaces(rs, s, both_sides=(side == "back")), w)
 
 
 def diffuse(stack: Stack, wavelength_nm, side: str = "front", *, nodes: int = DEFAULT_NODES) -> Diffuse:
@@ -211,7 +223,89 @@ def _natural_T_front(rs: ResolvedStack, angle_deg):
     return natural(stack_intensities(rs, s, both_sides=False).T_front)
 
 
-def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES):
+class Optics(eqx.Module):
+    r"""The part of a measurement that depends only on the indices, the coherent films and the
+    geometry — Fresnel coefficients of every interface or coherent packet, slant paths in the
+    thick layers and quadrature nodes, at the angles the geometry needs — and not on the thick
+    layers' thicknesses, their α, or ρg. Made by :func:`fixed_optics`; passed to
+    :func:`reflectance` (``optics=``) it is reused instead of recomputed: a fit of thick-layer
+    thicknesses, α(λ) and ρg(λ) evaluates the complex Fresnel algebra once, not at every step.
+
+    Fields (:class:`~layerstack_jax._response.Interfaces` or None): ``incidence`` at the
+    illumination angle, ``viewing`` at the viewing angle (:class:`Directional`, :class:`BRDF`),
+    ``diffuse`` at the back-side hemispherical nodes (over a background) with their ``weights``;
+    ``index`` and ``films``: the indices and coherent-film thicknesses they were made with
+    (checked against the stack when both are concrete).
+    """
+
+    geometry: Geometry
+    incidence: object
+    viewing: object
+    diffuse: object
+    weights: object
+    index: tuple
+    films: tuple
+    nodes: int = eqx.field(static=True, default=DEFAULT_NODES)
+
+
+def _films(rs: ResolvedStack) -> tuple:
+    return tuple(d for d, c in zip(rs.d, rs.coherent) if c)
+
+
+def _optics_resolved(rs: ResolvedStack, background: bool, geometry: Geometry, nodes: int) -> Optics:
+    incidence = viewing = diffuse = weights = None
+    if isinstance(geometry, Specular):
+        incidence = stack_interfaces(rs, _snell(rs, jnp.deg2rad(geometry.angle_deg)), both_sides=False)
+    elif isinstance(geometry, (Sphere, Directional, BRDF)):
+        incidence = stack_interfaces(rs, _snell(rs, jnp.deg2rad(geometry.incidence_deg)), both_sides=False)
+        if isinstance(geometry, (Directional, BRDF)):
+            if not background:
+                raise LayerstackError(
+                    "a specular substrate has no diffuse reflectance factor: measure it with a specular geometry "
+                    "(Specular(angle), CLI 'specular:ANGLE') or put the stack over a LambertianBackground"
+                )
+            viewing = stack_interfaces(rs, _snell(rs, jnp.deg2rad(geometry.viewing_deg)), both_sides=False)
+        if background:
+            s, weights = _hemisphere(rs, "back", nodes)
+            diffuse = stack_interfaces(rs, s, both_sides=True)
+    else:
+        raise LayerstackError(f"unsupported geometry {geometry!r}")
+    return Optics(geometry, incidence, viewing, diffuse, weights, tuple(rs.n), _films(rs), nodes)
+
+
+def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES) -> Optics:
+    """The :class:`Optics` of ``stack`` measured in ``geometry`` on ``wavelength_nm`` (nm).
+
+    Valid for any stack with the same structure, indices and coherent-film thicknesses: only
+    thick-layer thicknesses, α and ρg may differ when it is passed to :func:`reflectance`.
+    """
+    rs = resolve(stack, wavelength_nm)
+    return _optics_resolved(rs, isinstance(stack.exit, LambertianBackground), geometry, nodes)
+
+
+def _check_optics(optics: Optics, rs: ResolvedStack, geometry: Geometry, nodes: int) -> None:
+    if not isinstance(optics, Optics):
+        raise LayerstackError(f"optics must come from fixed_optics(), got {type(optics).__name__}")
+    if type(optics.geometry) is not type(geometry) or optics.nodes != nodes:
+        raise LayerstackError(
+            f"optics were made for {type(optics.geometry).__name__} with {optics.nodes} nodes, "
+            f"not {type(geometry).__name__} with {nodes}"
+        )
+    pairs = [("index", a, b) for a, b in zip(optics.index, rs.n)] + [
+        ("coherent film thickness", a, b) for a, b in zip(optics.films, _films(rs))
+    ]
+    if len(optics.index) != len(rs.n) or len(optics.films) != len(_films(rs)):
+        raise LayerstackError("optics were made for a stack of another structure")
+    for what, a, b in pairs:
+        if is_concrete((a, b)) and not np.allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=0):
+            raise LayerstackError(
+                f"optics were made with another {what}: rebuild them with fixed_optics() "
+                "(only thick-layer thicknesses, alpha and rho_g may change)"
+            )
+
+
+def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES,
+                optics: Optional[Optics] = None):
     r"""What an instrument of the given geometry reads, for natural light, shaped ``(wl,)``
     (more leading axes if the geometry's angles are arrays).
 
@@ -227,36 +321,41 @@ def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int =
 
     Over a :class:`Substrate` there is no diffuse light: the sphere reads R (SCI) or 0 (SCE);
     directional geometries raise an error.
+
+    ``optics``: the :func:`fixed_optics` of a stack with the same indices and coherent films
+    (only thick-layer thicknesses, α and ρg may differ): reused instead of recomputed.
     """
     rs = resolve(stack, wavelength_nm)
-    if isinstance(geometry, Specular):
-        out = stack_intensities(rs, _snell(rs, jnp.deg2rad(geometry.angle_deg)), both_sides=False)
-        R, T = natural(out.R_front), natural(out.T_front)
-        return {"R": R, "T": T, "A": 1.0 - R - T}[geometry.quantity]
     background = isinstance(stack.exit, LambertianBackground)
+    if optics is None:
+        o = _optics_resolved(rs, background, geometry, nodes)
+    else:
+        _check_optics(optics, rs, geometry, nodes)
+        if background and optics.diffuse is None and not isinstance(geometry, Specular):
+            raise LayerstackError("optics were made for a stack over a substrate, this one has a background")
+        if isinstance(geometry, (Directional, BRDF)) and not background:
+            return _optics_resolved(rs, background, geometry, nodes)  # raises the substrate message
+        o = optics
+    front = join_interfaces(rs, o.incidence, both_sides=False)
+    if isinstance(geometry, Specular):
+        R, T = natural(front.R_front), natural(front.T_front)
+        return {"R": R, "T": T, "A": 1.0 - R - T}[geometry.quantity]
+    d = _diffuse_joined(rs, "back", o.diffuse, o.weights) if background else None
     if isinstance(geometry, Sphere):
-        out = stack_intensities(rs, _snell(rs, jnp.deg2rad(geometry.incidence_deg)), both_sides=False)
-        total = jnp.zeros_like(natural(out.R_front))
+        total = jnp.zeros_like(natural(front.R_front))
         if background:
-            d = _diffuse_resolved(rs, "back", nodes)
             rho = rs.rho_g
-            total = d.t * rho * natural(out.T_front) / (1.0 - rho * d.r)
+            total = d.t * rho * natural(front.T_front) / (1.0 - rho * d.r)
         if geometry.specular == "included":
-            total = total + natural(out.R_front)
+            total = total + natural(front.R_front)
         return total
-    if isinstance(geometry, (Directional, BRDF)):
-        if not background:
-            raise LayerstackError(
-                "a specular substrate has no diffuse reflectance factor: measure it with a specular geometry "
-                "(Specular(angle), CLI 'specular:ANGLE') or put the stack over a LambertianBackground"
-            )
-        d = _diffuse_resolved(rs, "back", nodes)
-        rho = rs.rho_g
-        ratio = (jnp.real(rs.n[0]) / jnp.real(rs.n[-1])) ** 2
-        factor = ratio * _natural_T_front(rs, geometry.incidence_deg) * _natural_T_front(rs, geometry.viewing_deg)
-        value = factor * rho / (1.0 - rho * d.r)
-        return value / jnp.pi if isinstance(geometry, BRDF) else value
-    raise LayerstackError(f"unsupported geometry {geometry!r}")
+    # Directional / BRDF (checked by _optics_resolved)
+    rho = rs.rho_g
+    ratio = (jnp.real(rs.n[0]) / jnp.real(rs.n[-1])) ** 2
+    view = join_interfaces(rs, o.viewing, both_sides=False)
+    factor = ratio * natural(front.T_front) * natural(view.T_front)
+    value = factor * rho / (1.0 - rho * d.r)
+    return value / jnp.pi if isinstance(geometry, BRDF) else value
 
 
 def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry, *, nodes: int = DEFAULT_NODES):

@@ -23,7 +23,27 @@ import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
 
-__all__ = ["beer_attenuation", "add_layer"]
+__all__ = ["slant_path", "beer_attenuation_along", "beer_attenuation", "add_layer"]
+
+
+def slant_path(n, q):
+    r"""What Beer's law needs of the direction of light in a thick layer of index ``n``
+    at normal wavevector ``q``: :math:`(\operatorname{Re}\cos\theta, \operatorname{Im} q)`
+    with :math:`\cos\theta = q/\tilde n` (real arrays). Depends on the indices and the angle
+    only — not on thickness or α — so a fit of those can compute it once."""
+    return jnp.real(q / n), jnp.imag(q)
+
+
+def beer_attenuation_along(cos_real, im_q, thickness, alpha, wavelength):
+    r"""Single-pass attenuation :math:`t` (see :func:`beer_attenuation`) from the slant path
+    ``(cos_real, im_q)`` of :func:`slant_path`; thickness in nm, alpha in 1/nm (or None),
+    wavelength in nm."""
+    optical_depth = (4 * jnp.pi / wavelength) * im_q * thickness
+    if alpha is not None:
+        ok = cos_real > 0
+        beer = alpha * thickness / jnp.where(ok, cos_real, 1.0)
+        optical_depth = optical_depth + jnp.where(ok, beer, jnp.inf)
+    return jnp.exp(-optical_depth)
 
 
 def beer_attenuation(n, q, thickness, alpha, wavelength):
@@ -45,13 +65,7 @@ def beer_attenuation(n, q, thickness, alpha, wavelength):
         n: complex index, q: normal wavevector (same shape or broadcastable),
         thickness: nm, alpha: 1/nm (or None), wavelength: nm.
     """
-    optical_depth = (4 * jnp.pi / wavelength) * jnp.imag(q) * thickness
-    if alpha is not None:
-        cos_real = jnp.real(q / n)
-        ok = cos_real > 0
-        beer = alpha * thickness / jnp.where(ok, cos_real, 1.0)
-        optical_depth = optical_depth + jnp.where(ok, beer, jnp.inf)
-    return jnp.exp(-optical_depth)
+    return beer_attenuation_along(*slant_path(n, q), thickness, alpha, wavelength)
 
 
 def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIntensities:

@@ -13,17 +13,61 @@ interface with its own R_front ≠ R_back when its films absorb.
 from __future__ import annotations
 
 
+from typing import NamedTuple
+
 from ._coherent import PacketIntensities, packet_intensities
 from ._fresnel import normal_wavevector
-from ._incoherent import add_layer, beer_attenuation
+from ._incoherent import add_layer, beer_attenuation_along, slant_path
 from ._stack import ResolvedStack
 
-__all__ = ["thick_media", "stack_intensities", "natural"]
+__all__ = ["thick_media", "Interfaces", "stack_interfaces", "join_interfaces", "stack_intensities", "natural"]
 
 
 def thick_media(coherent: tuple) -> list[int]:
     """Positions (in the media list ambient, layers…, exit) of the semi-infinite and thick media."""
     return [0] + [i + 1 for i, c in enumerate(coherent) if not c] + [len(coherent) + 1]
+
+
+class Interfaces(NamedTuple):
+    """Everything of a stack's response at given Snell invariants that does not depend on the
+    thick layers' thicknesses and absorption coefficients (nor on ρg).
+
+    ``packets``: one :class:`PacketIntensities` per run of coherent films between thick media
+    (a bare Fresnel interface when the run is empty); ``paths``: per thick layer, its
+    :func:`~layerstack_jax._incoherent.slant_path` ``(Re cos θ, Im q)``. Fields ``(2, *batch, wl)``
+    (packets) and ``(*batch, wl)`` (paths).
+    """
+
+    packets: tuple
+    paths: tuple
+
+
+def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interfaces:
+    """The :class:`Interfaces` of ``rs`` at Snell invariant ``s`` (see :func:`stack_intensities`)."""
+    wl = rs.wavelength
+    thick = thick_media(rs.coherent)
+    # The running composition needs the back side of every packet but the last; XLA removes
+    # whatever is not used by the caller.
+    sides = both_sides or len(thick) > 2
+    packets = tuple(
+        packet_intensities(rs.n[a : b + 1], rs.d[a : b - 1], s, wl, both_sides=sides)
+        for a, b in zip(thick[:-1], thick[1:])
+    )
+    paths = tuple(slant_path(rs.n[a], normal_wavevector(rs.n[a], s)) for a in thick[1:-1])
+    return Interfaces(packets, paths)
+
+
+def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True) -> PacketIntensities:
+    """Join the packets through the thick layers of ``rs`` (Beer attenuation with the layers'
+    thicknesses and α, then the adding rule, Simonot eqs. 59–60)."""
+    thick = thick_media(rs.coherent)
+    total = interfaces.packets[0]
+    for a, packet, (cos_real, im_q) in zip(thick[1:-1], interfaces.packets[1:], interfaces.paths):
+        t = beer_attenuation_along(cos_real, im_q, rs.d[a - 1], rs.alpha[a - 1], rs.wavelength)
+        total = add_layer(total, packet, t)
+    if not both_sides:
+        total = PacketIntensities(total.R_front, total.T_front, None, None)
+    return total
 
 
 def stack_intensities(rs: ResolvedStack, s, *, both_sides: bool = True) -> PacketIntensities:
@@ -39,25 +83,7 @@ def stack_intensities(rs: ResolvedStack, s, *, both_sides: bool = True) -> Packe
         :class:`PacketIntensities` with fields ``(2, *batch, wl)``, polarization ``(s, p)``
         first. ``T_*`` is the power entering the far medium.
     """
-    wl = rs.wavelength
-    thick = thick_media(rs.coherent)
-    # The running composition needs the back side of every packet but the last; XLA removes
-    # whatever is not used by the caller.
-    sides = both_sides or len(thick) > 2
-    total = None
-    for a, b in zip(thick[:-1], thick[1:]):
-        packet = packet_intensities(rs.n[a : b + 1], rs.d[a : b - 1], s, wl, both_sides=sides)
-        if total is None:
-            total = packet
-            continue
-        # medium a is a thick layer: attenuation between the previous packet and this one.
-        n_a = rs.n[a]
-        q_a = normal_wavevector(n_a, s)
-        t = beer_attenuation(n_a, q_a, rs.d[a - 1], rs.alpha[a - 1], wl)
-        total = add_layer(total, packet, t)
-    if not both_sides:
-        total = PacketIntensities(total.R_front, total.T_front, None, None)
-    return total
+    return join_interfaces(rs, stack_interfaces(rs, s, both_sides=both_sides), both_sides=both_sides)
 
 
 def natural(x):

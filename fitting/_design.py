@@ -297,6 +297,9 @@ def optimize_thicknesses(
 
     @jax.jit
     def solve_all(X):
+        if X.shape[0] == 1:  # one start: no vmap (compiles ~1.5x faster)
+            sol = solver.run(X[0], bounds=bounds)
+            return tuple(a[None] for a in (sol.params, total(sol.params), sol.state.iter_num, sol.state.error))
         sol = jax.vmap(lambda x0: solver.run(x0, bounds=bounds))(X)
         return sol.params, jax.vmap(total)(sol.params), sol.state.iter_num, sol.state.error
 
@@ -415,17 +418,22 @@ def needle_function(
     return NeedleScan(layer, frac, derivative.reshape(-1, n_mat).T)
 
 
-def insert_needle(stack: ls.Stack, scan: NeedleScan, materials: Sequence, thickness_nm: float = 1.0):
+def insert_needle(stack: ls.Stack, scan: NeedleScan, materials: Sequence, thickness_nm: float = 1.0,
+                  names: Optional[Sequence[str]] = None):
     """Insert a needle of ``thickness_nm`` at the most negative point of ``scan``.
 
+    The needle layer is named ``names[m]`` for material ``m`` (default ``"needle"``).
     Returns ``(new_stack, (material_index, layer, fraction, derivative))`` or ``(stack, None)``
     when no point has a negative derivative (the design is needle-optimal).
     """
     m, p = np.unravel_index(int(np.argmin(scan.derivative)), scan.derivative.shape)
     if scan.derivative[m, p] >= 0:
         return stack, None
+    if names is not None and len(names) != len(materials):
+        raise LayerstackError(f"insert_needle: {len(names)} names for {len(materials)} materials")
     j, f = int(scan.layer[p]), float(scan.fraction[p])
-    new = _split_with_needle(stack, j, f, materials[m], float(thickness_nm))
+    name = "needle" if names is None else str(names[m])
+    new = _split_with_needle(stack, j, f, materials[m], float(thickness_nm), name=name)
     new = ls.Stack(new.ambient, [_concrete(layer) for layer in new.layers], new.exit)
     return new, (int(m), j, f, float(scan.derivative[m, p]))
 
@@ -451,21 +459,26 @@ def needle_design(
     points_per_layer: int = 32,
     min_thickness_nm: float = 0.5,
     maxiter: int = 500,
+    names: Optional[Sequence[str]] = None,
+    start: Optional[DesignResult] = None,
 ) -> tuple[DesignResult, list[dict]]:
     """Grow a design by the needle method: refine, scan the needle function, insert, repeat.
 
     Every coherent layer's thickness is free. Stops after ``iterations`` insertions, when no
-    needle lowers the merit, or when ``max_layers`` would be exceeded. Returns the final
-    :class:`DesignResult` and a history (one dict per step: layers, merit, inserted needle).
+    needle lowers the merit, or when ``max_layers`` would be exceeded. Needle layers are named
+    ``names[m]`` after their material (default ``"needle"``). ``start``: a refinement of
+    ``stack`` already made (e.g. multi-start, with per-layer bounds) to begin from instead of
+    refining ``stack`` again. Returns the final :class:`DesignResult` and a history (one dict
+    per step: layers, merit, inserted needle).
     """
-    result = optimize_thicknesses(stack, targets, bounds_nm=bounds_nm, maxiter=maxiter)
+    result = start if start is not None else optimize_thicknesses(stack, targets, bounds_nm=bounds_nm, maxiter=maxiter)
     history = [{"layers": len(result.stack.layers), "merit": result.merit, "needle": None}]
     for _ in range(iterations):
         current = _drop_thin_layers(result.stack, min_thickness_nm)
         if max_layers is not None and len(current.layers) + 2 > max_layers:
             break
         scan = needle_function(current, targets, materials, points_per_layer=points_per_layer)
-        candidate, needle = insert_needle(current, scan, materials)
+        candidate, needle = insert_needle(current, scan, materials, names=names)
         if needle is None:
             break
         refined = optimize_thicknesses(candidate, targets, bounds_nm=bounds_nm, maxiter=maxiter)

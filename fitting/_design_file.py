@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Mapping, Optional
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -54,6 +55,7 @@ from ._design import (
     needle_design,
     optimize_thicknesses,
     thickness_yield,
+    with_thicknesses,
 )
 
 __all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "DesignOutcome", "load_design", "run_design",
@@ -97,7 +99,7 @@ class NeedleSettings:
 
     materials: tuple
     names: tuple
-    specs: tuple  # stack-file tables {name, n[, k]} of the candidates
+    specs: tuple  # stack-file entries {n[, k]} of the candidates
     iterations: int
     min_thickness_nm: float
     max_thickness_nm: float
@@ -120,6 +122,7 @@ class DesignFile:
     lower_nm: np.ndarray
     upper_nm: np.ndarray
     targets: tuple
+    method: str = "scipy"
     starts: int = 1
     seed: int = 0
     max_steps: int = 500
@@ -366,7 +369,7 @@ def _needle(source: str, t, base_dir: Path, stack: ls.Stack, free: tuple, upper:
         default = (n.get("material") if isinstance(n, Mapping) and isinstance(n.get("material"), str)
                    else f"n={n:g}" if _is_number(n) else f"needle material {i + 1}")
         names.append(_string(mw, "name", m.get("name", default)))
-        specs.append({"name": names[-1], **{k: m[k] for k in ("n", "k") if k in m}})
+        specs.append({k: m[k] for k in ("n", "k") if k in m})
     for i, layer in enumerate(stack.layers):
         if layer.coherent != (i in free):
             what = "coherent (a thin film) but its thickness is not free" if layer.coherent else "incoherent but free"
@@ -375,6 +378,9 @@ def _needle(source: str, t, base_dir: Path, stack: ls.Stack, free: tuple, upper:
                 "coherent layer thickness_nm = { value = ..., free = true }", "thickness_nm")
     max_nm = _number(where, "max_thickness_nm", t.get("max_thickness_nm", float(np.max(upper))), positive=True,
                      what="nm")
+    if max_nm < np.max(upper):
+        raise where.error(f"must be >= every free layer's max ({np.max(upper):g} nm): it bounds all films once "
+                          "needles are in", "max_thickness_nm")
     max_layers = t.get("max_layers")
     return NeedleSettings(
         materials=tuple(materials), names=tuple(names), specs=tuple(specs),
@@ -400,7 +406,8 @@ def _check_grids(source: str, stack: ls.Stack, targets: tuple, needle: Optional[
                 except LayerstackError as e:
                     raise LayerstackError(f"needle material {name!r}: {e}") from None
         except LayerstackError as e:
-            raise LayerstackError(f"{source}: [[targets]] no. {i + 1}: wavelength grid {wl[0]:g}–{wl[-1]:g} nm: {e}") from None
+            grid = f"wavelength grid {wl[0]:g}–{wl[-1]:g} nm"
+            raise LayerstackError(f"{source}: [[targets]] no. {i + 1}: {grid}: {e}") from None
 
 
 def _layer_spec(t: Mapping) -> dict:
@@ -423,7 +430,8 @@ def load_design(path) -> DesignFile:
     stack = stack_from_dict(raw, path.parent, source=source, free=declarations)
     if not isinstance(stack.exit, ls.Substrate):
         raise _Where(source, "[background]").error(
-            "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] is not supported")
+            "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] "
+            "is not supported")
     raw_layers = raw.get("layers", [])
     free, lower, upper = _free_thicknesses(source, raw_layers, declarations, stack)
     targets = _targets(source, d)
@@ -432,9 +440,10 @@ def load_design(path) -> DesignFile:
     opt = _table(top, d, "optimizer")
     ow = _Where(source, "[optimizer]")
     _reject_unknown(ow, opt, _OPTIMIZER_KEYS)
-    method = opt.get("method", "lbfgsb")
-    if method != "lbfgsb":
-        raise ow.error(f"must be 'lbfgsb' (L-BFGS-B within the thickness bounds), got {method!r}", "method")
+    method = opt.get("method", "scipy")
+    if method not in ("scipy", "jaxopt"):
+        raise ow.error(f"must be 'scipy' (SciPy's L-BFGS-B, starts in turn) or 'jaxopt' (jaxopt's L-BFGS-B, "
+                       f"starts vmapped), got {method!r}", "method")
     needle = _needle(source, opt["needle"], path.parent, stack, free, upper) if "needle" in opt else None
     _check_grids(source, stack, targets, needle)
 
@@ -457,12 +466,13 @@ def load_design(path) -> DesignFile:
              for i, layer in enumerate(stack.layers)]
     specs = {f"L{i}": (layer.name, _layer_spec(t)) for i, (layer, t) in enumerate(zip(stack.layers, raw_layers))}
     if needle:
-        specs.update({f"N{m}": (name, {**spec, "coherent": True}) for m, (name, spec) in
-                      enumerate(zip(needle.names, ({k: v for k, v in s.items() if k != "name"} for s in needle.specs)))})
+        for m, (name, spec) in enumerate(zip(needle.names, needle.specs)):
+            specs[f"N{m}"] = (name, {**spec, "coherent": True})
     description = d.get("description", "")
     return DesignFile(
         path=path, description=description, stack=ls.Stack(stack.ambient, keyed, stack.exit), raw=raw,
         layer_specs=specs, free=free, lower_nm=lower, upper_nm=upper, targets=targets,
+        method=method,
         starts=_integer(ow, "starts", opt.get("starts", 1), 1),
         seed=_integer(ow, "seed", opt.get("seed", 0), 0),
         max_steps=_integer(ow, "max_steps", opt.get("max_steps", 500), 1),
@@ -520,14 +530,35 @@ def _merge_adjacent(stack: ls.Stack) -> ls.Stack:
     return ls.Stack(stack.ambient, layers, stack.exit)
 
 
-def _evaluate(target: DesignTarget, stack: ls.Stack) -> TargetOutcome:
-    part = target.parts[0]
-    values = np.asarray(part.evaluate(stack), dtype=float)
-    delta_e = None
-    if target.is_colour:
-        delta_e = np.asarray(ls.delta_e_2000(values, part.lab), dtype=float).reshape(-1)
-    met = all(bool(c.within_spec(stack)) for c in target.checks)
-    return TargetOutcome(target, values, delta_e, float(sum(p.merit(stack) for p in target.parts)), met)
+def _of_thicknesses(stack: ls.Stack, fn):
+    """``fn(stack)`` compiled once as a function of the layer thicknesses (materials stay
+    constants): applies to every stack of the same layout. Op-by-op evaluation would compile
+    hundreds of small kernels instead."""
+    every = tuple(range(len(stack.layers)))
+    compiled = jax.jit(lambda d: fn(with_thicknesses(stack, every, d)))
+    return lambda st: compiled(jnp.asarray([float(np.asarray(layer.thickness)) for layer in st.layers]))
+
+
+def _summary(targets: tuple):
+    """stack → (total merit, per target: values, ΔE2000 or None, merit, within spec)."""
+    def summary(stack):
+        rows = []
+        for t in targets:
+            values = t.parts[0].evaluate(stack)
+            delta_e = ls.delta_e_2000(values, t.parts[0].lab) if t.is_colour else None
+            ok = jnp.all(jnp.stack([c.within_spec(stack) for c in t.checks]))
+            rows.append((values, delta_e, sum(p.merit(stack) for p in t.parts), ok))
+        return merit(stack, [p for t in targets for p in t.parts]), rows
+
+    return summary
+
+
+def _outcomes(targets: tuple, rows) -> tuple:
+    return tuple(
+        TargetOutcome(t, np.asarray(values, float), None if delta_e is None else np.asarray(delta_e, float).reshape(-1),
+                      float(m), bool(ok))
+        for t, (values, delta_e, m, ok) in zip(targets, rows)
+    )
 
 
 def run_design(design: DesignFile) -> DesignOutcome:
@@ -536,11 +567,12 @@ def run_design(design: DesignFile) -> DesignOutcome:
     start_time = time.perf_counter()
     targets = design.library_targets
     robust = design.robustness if design.optimize_robust else None
-    initial = float(merit(design.stack, targets))
+    summary = _of_thicknesses(design.stack, _summary(design.targets))
+    initial = float(summary(design.stack)[0])
     result = optimize_thicknesses(
         design.stack, targets, free=design.free, bounds_nm=(design.lower_nm, design.upper_nm),
         n_starts=design.starts, seed=design.seed, maxiter=design.max_steps, tol=design.gradient_tolerance,
-        robust=None if design.needle else robust,
+        robust=None if design.needle else robust, method=design.method,
     )
     history: list = []
     free = design.free
@@ -551,21 +583,26 @@ def run_design(design: DesignFile) -> DesignOutcome:
             result.stack, targets, list(nd.materials), iterations=nd.iterations, max_layers=nd.max_layers,
             bounds_nm=bounds, points_per_layer=nd.points_per_layer, min_thickness_nm=nd.min_thickness_nm,
             maxiter=design.max_steps, names=[f"N{m}" for m in range(len(nd.materials))], start=result,
+            method=design.method,
         )
         stack = _merge_adjacent(result.stack)
         kept = [lay for lay in stack.layers if not (lay.coherent and float(lay.thickness) < nd.min_thickness_nm)]
         if len(kept) < len(stack.layers) or robust is not None:
             stack = _merge_adjacent(ls.Stack(stack.ambient, kept, stack.exit))
             result = optimize_thicknesses(stack, targets, bounds_nm=bounds, maxiter=design.max_steps,
-                                          tol=design.gradient_tolerance, robust=robust)
+                                          tol=design.gradient_tolerance, robust=robust, method=design.method)
     stack = _merge_adjacent(result.stack)
     if design.needle:
         free = tuple(i for i, lay in enumerate(stack.layers) if lay.coherent)
-    outcomes = tuple(_evaluate(t, stack) for t in design.targets)
+    if len(stack.layers) != len(design.stack.layers) or any(
+            a.name != b.name or a.coherent != b.coherent for a, b in zip(stack.layers, design.stack.layers)):
+        summary = _of_thicknesses(stack, _summary(design.targets))  # the needles changed the layout
+    final_merit, rows = summary(stack)
+    outcomes = _outcomes(design.targets, rows)
     yield_ = None
     if design.robustness is not None:
         yield_ = thickness_yield(stack, design.check_targets, design.robustness, free=free)
-    return DesignOutcome(design, stack, initial, float(merit(stack, targets)), result, history, outcomes, yield_,
+    return DesignOutcome(design, stack, initial, float(final_merit), result, history, outcomes, yield_,
                          time.perf_counter() - start_time)
 
 
@@ -588,11 +625,11 @@ def _target_line(i: int, t: TargetOutcome) -> str:
     part = t.target.parts[0]
     verdict = "met" if t.met else "NOT met"
     if t.target.is_colour:
-        labs = "; ".join(f"({L:.2f}, {a:.2f}, {b:.2f})" for L, a, b in t.values)
-        worst = float(np.max(t.delta_e))
+        labs = ", ".join(f"({L:.2f}, {a:.2f}, {b:.2f})" for L, a, b in t.values)
+        delta_e = ", ".join(f"{x:.4g}" for x in t.delta_e)
         return (f"target {i} {t.target.name!r}: colour of R under {part.colour_space.illuminant}, "
-                f"{part.colour_space.observer.replace('Standard Observer', 'observer')}, at {_angles_text(part.angle_deg)}: "
-                f"Lab {labs}; ΔE2000 {worst:.4g}; spec {t.target.spec}: {verdict}")
+                f"{part.colour_space.observer.replace('Standard Observer', 'observer')}, "
+                f"at {_angles_text(part.angle_deg)}: Lab {labs}; ΔE2000 {delta_e}; spec {t.target.spec}: {verdict}")
     q = part.quantity
     pol = "" if part.polarization == "natural" else f" ({part.polarization}-polarized)"
     v = t.values
@@ -606,7 +643,7 @@ def design_report(outcome: DesignOutcome) -> list[str]:
     d, r = outcome.design, outcome.result
     lines = [f"layerstack design of {d.path.name}" + (f": {d.description}" if d.description else "")]
     starts = f"{d.starts} start{'s' if d.starts > 1 else ''}" + (f" (seed {d.seed})" if d.starts > 1 else "")
-    lines.append(f"optimizer: L-BFGS-B, {starts}; last refinement {r.message}")
+    lines.append(f"optimizer: L-BFGS-B ({d.method}), {starts}; last refinement {r.message}")
     if d.needle:
         added = [d.needle.names[h["needle"][0]] for h in outcome.history[1:]]
         merits = " -> ".join(f"{h['merit']:.6g}" for h in outcome.history)
@@ -637,12 +674,15 @@ def design_report(outcome: DesignOutcome) -> list[str]:
 
 # ---------------------------------------------------------------------------- the result file
 def _rebase_tables(x, base_dir: Path, out_dir: Path):
-    """Relative ``table = "file.csv"`` names, valid from ``base_dir``, made valid from ``out_dir``."""
+    """Relative ``table = "file.csv"`` names, valid from ``base_dir``, made valid from ``out_dir``
+    (relative when the two share a directory below the root, absolute otherwise)."""
     if isinstance(x, Mapping):
         out = {}
         for k, v in x.items():
             if k == "table" and isinstance(v, str) and not Path(v).is_absolute():
-                v = os.path.relpath((base_dir / v).resolve(), out_dir.resolve())
+                table, here = (base_dir / v).resolve(), out_dir.resolve()
+                shared = Path(os.path.commonpath([table, here]))
+                v = str(table) if shared == Path(shared.anchor) else os.path.relpath(table, here)
             out[k] = _rebase_tables(v, base_dir, out_dir)
         return out
     if isinstance(x, list):
@@ -721,8 +761,11 @@ def plot_design(outcome: DesignOutcome, path, *, title: str = "") -> Path:
         grid = _plot_grid(outcome.stack, wl)
         probe = SpectralTarget(jnp.asarray(grid), 0.0, quantity=part.quantity, angle_deg=part.angle_deg,
                                polarization=part.polarization)
-        design_q = np.asarray(probe.evaluate(outcome.stack))
-        start_q = np.asarray(probe.evaluate(start))
+        evaluate = _of_thicknesses(outcome.stack, probe.evaluate)
+        design_q = np.asarray(evaluate(outcome.stack))
+        if [lay.name for lay in start.layers] != [lay.name for lay in outcome.stack.layers]:
+            evaluate = _of_thicknesses(start, probe.evaluate)  # needles changed the layout
+        start_q = np.asarray(evaluate(start))
         for a, angle in enumerate(np.asarray(part.angle_deg)):
             style = dict(marker="o", ms=4) if grid.size == 1 else {}
             ax.plot(grid, design_q[a], "-", color=f"C{a}", lw=1.8, label=f"design {angle:g}°", **style)
@@ -745,7 +788,8 @@ def plot_design(outcome: DesignOutcome, path, *, title: str = "") -> Path:
         ax.set_ylim(bottom=0.0)
         ax.set_xlim(float(grid[0]) - (grid.size == 1), float(grid[-1]) + (grid.size == 1))
         ax.grid(True, alpha=0.3)
-        ax.set_title(f"{t.target.name}: {t.target.spec} — {'met' if t.met else 'NOT met'}", fontsize=10)
+        pol = "" if part.polarization == "natural" else f", {part.polarization}-polarized"
+        ax.set_title(f"{t.target.name}{pol}: {t.target.spec} — {'met' if t.met else 'NOT met'}", fontsize=10)
         ax.legend(loc="best", frameon=False, fontsize=8)
     if colour:
         ax = axes[-1]

@@ -115,7 +115,9 @@ tables — whose layers to optimise say so, plus what the coating must do::
     weight = 1.0                    # (step_nm = 5: the 380–780 nm colorimetry grid)
 
     [optimizer]                     # optional
-    method = "lbfgsb"               # L-BFGS-B within the bounds (jaxopt), exact gradients
+    method = "scipy"                # L-BFGS-B within the bounds, exact gradients: "scipy" (default:
+                                    #   SciPy's, starts in turn, seconds to start) or "jaxopt" (starts
+                                    #   vmapped in one compiled solve: many starts, GPU)
     starts = 8                      # the file's thicknesses plus 7 random starts (default 1)
     seed = 0
     max_steps = 500                 # iteration cap per start (default 500)

@@ -9,6 +9,7 @@ the needle case three): these tests are slow mostly by XLA compile time.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -246,3 +247,27 @@ def test_bad_design_files_exit_2(tmp_path, capsys, design, needles):
     for needle in needles:
         assert needle in err, err
     assert not out.exists()
+
+
+def test_save_stack_round_trip_and_table_paths(tmp_path):
+    """io.save_stack writes TOML that load_stack reads back to the same optics; the design
+    writer's table-path rebasing keeps a relative table valid from another directory."""
+    from fitting._design_file import _rebase_tables
+    from layerstack_jax.io import save_stack, stack_from_dict, stack_to_dict
+
+    examples = Path(__file__).resolve().parent.parent / "examples"
+    stack = load_stack(examples / "thin_film_on_metal.toml")
+    out = save_stack(tmp_path / "a" / "copy.toml", stack, header='first line\nsecond "line"')
+    assert out.read_text().startswith('# first line\n# second "line"\n')
+    assert stack_to_dict(load_stack(out)) == stack_to_dict(stack)  # same numbers, bit for bit
+
+    raw = {"layers": [{"name": "SiO2", "n": 1.46, "thickness_nm": 120.0, "coherent": True}],
+           "substrate": {"n": {"table": "aluminium_nk.csv"}}}
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "aluminium_nk.csv").write_bytes((examples / "aluminium_nk.csv").read_bytes())
+    for out_dir, expected in ((tmp_path / "b", "../src/aluminium_nk.csv"), (src, "aluminium_nk.csv")):
+        moved = _rebase_tables(raw, src, out_dir)
+        assert moved["substrate"]["n"]["table"] == expected
+        again = load_stack(save_stack(out_dir / "moved.toml", moved))
+        assert stack_to_dict(again) == stack_to_dict(stack_from_dict(raw, src))

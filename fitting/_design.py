@@ -278,7 +278,7 @@ def _solve_scipy(total, X0, lo, hi, maxiter: int, tol: float):
     params, values, iters, ok, messages = [], [], [], [], []
     for x0 in X0:
         r = minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=Bounds(lo, hi),
-                     options={"maxiter": maxiter, "gtol": tol})
+                     options={"maxiter": maxiter, "gtol": tol, "ftol": 1e-12})
         g = fun(r.x)[1]
         pg = float(np.linalg.norm(np.clip(r.x - g, lo, hi) - r.x))  # projected-gradient norm
         params.append(r.x)

@@ -58,7 +58,7 @@ from ._design import (
     with_thicknesses,
 )
 
-__all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "DesignOutcome", "load_design", "run_design",
+__all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "TargetOutcome", "DesignOutcome", "load_design", "run_design",
            "design_report", "design_stack_dict", "plot_design"]
 
 _DESIGN_KEYS = ("targets", "optimizer", "robustness")

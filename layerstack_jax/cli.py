@@ -410,7 +410,8 @@ def _cmd_design(args) -> int:
         header = "\n".join([f"Designed by `layerstack design {args.design}` on {stamp}.", *report])
         save_stack(out, design_stack_dict(outcome, out.parent), header=header)
         print("\n".join(report))
-        print(f"{PROG}: wrote {out} ({len(outcome.stack.layers)} layers) in {outcome.seconds:.1f} s")
+        n = len(outcome.stack.layers)
+        print(f"{PROG}: wrote {out} ({n} layer{'' if n == 1 else 's'}) in {outcome.seconds:.1f} s")
         if args.plot:
             plot = plot_design(outcome, args.plot)
             print(f"{PROG}: wrote {plot} (targets vs design)")

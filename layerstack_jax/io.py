@@ -832,7 +832,7 @@ def _toml_table(d: Mapping, what: str) -> list[str]:
     return [f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in d.items()]
 
 
-def dumps_stack(d: Mapping, header: str = "") -> str:
+def _dumps_stack(d: Mapping, header: str = "") -> str:
     """A stack dict (schema in the module docstring, e.g. from :func:`stack_to_dict`) as TOML
     text, ``header`` written first as ``#`` comment lines."""
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
@@ -866,7 +866,7 @@ def save_stack(path, stack, *, header: str = "") -> Path:
     d = stack_to_dict(stack) if isinstance(stack, Stack) else stack
     if not isinstance(d, Mapping):
         raise LayerstackError(f"save_stack: expected a Stack or a dict, got {type(stack).__name__}")
-    text = dumps_stack(d, header)
+    text = _dumps_stack(d, header)
     path = Path(path)
     if path.parent and not path.parent.exists():
         path.parent.mkdir(parents=True, exist_ok=True)

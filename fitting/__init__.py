@@ -15,7 +15,9 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ));
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
-  thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`).
+  thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
+* :mod:`fitting._design_file` — design files for ``layerstack design`` (targets, optimizer and
+  robustness tables on top of a stack file; format in :mod:`layerstack_jax.io`).
 
 The forward model is always the public :func:`layerstack_jax.reflectance`; fitting never reaches
 inside it. Units: nm, 1/nm, degrees in geometries, as in :mod:`layerstack_jax`.

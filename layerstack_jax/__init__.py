@@ -77,6 +77,7 @@ from .io import parse_wavelengths as parse_wavelengths
 from .io import read_csv_columns as read_csv_columns
 from .io import read_spectra_csv as read_spectra_csv
 from .io import save_spectra_csv as save_spectra_csv
+from .io import save_stack as save_stack
 from .io import stack_from_dict as stack_from_dict
 from .io import stack_to_dict as stack_to_dict
 

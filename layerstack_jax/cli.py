@@ -1,13 +1,18 @@
-"""Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]`` and
-``layerstack fit STACK.toml DATA.csv -g 45/0 -o result.json [--plot fit.png]``.
+"""Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]``,
+``layerstack fit STACK.toml DATA.csv -g 45/0 -o result.json [--plot fit.png]`` and
+``layerstack design DESIGN.toml -o design.toml [--plot design.png]``.
 
 Runnable as ``layerstack`` (console script) or ``python -m layerstack_jax.cli``. The stack file
 format is described in :mod:`layerstack_jax.io`.
 
 Unlike the library, the command line enables float64 (``jax_enable_x64``) unless ``--float32``
 is given, and restores the previous setting when it returns (so ``main`` can be called
-in-process). ``fit`` exits with status 1 when a fit did not converge (the report says why). Input problems (bad stack file, CSV table, geometry, wavelength grid, unwritable
-output) print ``layerstack: error: <message>`` to stderr and give exit status 2.
+in-process). ``fit`` exits with status 1 when a fit did not converge (the report says why);
+``design`` exits with status 1 when the design misses a target (or the required yield) — it
+still writes the best design found, and the report says which target failed; a design that
+meets every target exits 0 even if the optimizer hit its step limit. Input problems (bad stack
+or design file, CSV table, geometry, wavelength grid, unwritable output) print
+``layerstack: error: <message>`` to stderr and give exit status 2.
 """
 
 from __future__ import annotations
@@ -370,12 +375,50 @@ def _cmd_fit(args) -> int:
     return 0 if n_ok == len(results) else 1
 
 
-# ============================================================== more subcommands
-# `design` (optimise a stack towards a target) goes here: write `_add_design_parser(sub)` /
-# `_cmd_design(args)` like the predict and fit pairs above, and add the builder to _SUBCOMMANDS.
-# ================================================================================
+# ----------------------------------------------------------------------- design
+def _add_design_parser(sub) -> None:
+    p = sub.add_parser(
+        "design",
+        help="optimise layer thicknesses of a stack towards spectral and colour targets",
+        description="Optimise the layer thicknesses marked free in a design file (a stack file with "
+        "thickness_nm = { value = 100, free = true, min = 0, max = 400 }, [[targets]], [optimizer] and "
+        "[robustness] tables; format: see layerstack_jax.io) and write the designed stack as a stack file "
+        "(readable by `layerstack predict`) whose header comments state the merit before and after, every "
+        "target's result and the yield. Exit status 0 when every target is met (and the yield reaches "
+        "min_yield), 1 when not, 2 for a bad input.",
+    )
+    p.add_argument("design", metavar="DESIGN.toml", help="design file (format: see layerstack_jax.io)")
+    p.add_argument("--output", "-o", required=True, metavar="OUT.toml", help="designed stack file to write")
+    p.add_argument("--plot", metavar="OUT.png", help="also plot the targets against the design (PNG)")
+    p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
+    p.set_defaults(func=_cmd_design)
 
-_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser)  # later: _add_design_parser
+
+def _cmd_design(args) -> int:
+    from datetime import datetime
+
+    from .io import save_stack
+
+    with _precision(args.float32):
+        from fitting._design_file import design_report, design_stack_dict, load_design, plot_design, run_design
+
+        design = load_design(args.design)
+        outcome = run_design(design)
+        report = design_report(outcome)
+        out = Path(args.output)
+        stamp = datetime.now().isoformat(timespec="seconds")
+        header = "\n".join([f"Designed by `layerstack design {args.design}` on {stamp}.", *report])
+        save_stack(out, design_stack_dict(outcome, out.parent), header=header)
+        print("\n".join(report))
+        n = len(outcome.stack.layers)
+        print(f"{PROG}: wrote {out} ({n} layer{'' if n == 1 else 's'}) in {outcome.seconds:.1f} s")
+        if args.plot:
+            plot = plot_design(outcome, args.plot)
+            print(f"{PROG}: wrote {plot} (targets vs design)")
+    return 0 if outcome.met else 1
+
+
+_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser, _add_design_parser)
 
 
 def _build_parser() -> argparse.ArgumentParser:

@@ -73,6 +73,85 @@ both or neither of ``[substrate]`` and ``[background]``, a negative number, a ma
 raises :class:`~layerstack_jax.LayerstackError` with a message naming the file, the table and
 key, and what is wrong.
 
+Writing: :func:`save_stack` writes a :class:`Stack` (via :func:`stack_to_dict`) or a stack dict as
+a TOML stack file, with optional ``#`` header lines.
+
+Design files
+------------
+``layerstack design DESIGN.toml -o design.toml [--plot design.png]`` optimises layer
+thicknesses (implementation: :mod:`fitting._design_file` on :mod:`fitting._design`). A design
+file is a stack file — same ``description``, ``[ambient]``, ``[[layers]]``, ``[substrate]``
+tables — whose layers to optimise say so, plus what the coating must do::
+
+    [[layers]]
+    name = "MgF2"
+    n = { material = "MgF2", source = "Li-o" }
+    thickness_nm = { value = 100, free = true, min = 0, max = 400 }   # optimised in [min, max]
+    coherent = true                 # (defaults min = 0, max = 1000 nm; a plain number stays fixed)
+
+    [substrate]                     # a specular substrate ([background] is not supported)
+    n = 1.52
+
+    [[targets]]                     # one or more; type = "spectral" (default) or "colour"
+    name = "visible AR"             # optional, used in the report
+    quantity = "R"                  # R, T or A: specular, light from the ambient
+    band_nm = [420, 680]            # a band, both ends included ...
+    step_nm = 10                    #   ... sampled every step_nm (default 5)
+    # wavelength_nm = 550           # ... or one wavelength or a list [450, 550, 650]
+    angle_deg = 0                   # angle of incidence or list of angles, degrees (default 0)
+    polarization = "natural"        # natural (default), s or p
+    value = 0.0                     # aim; passes where |Q − value| <= tolerance everywhere ...
+    tolerance = 0.005               #   (default 0.01; also the merit's unit of deviation)
+    # max = 0.005 / min = 0.9       # ... or one-sided bound(s): pass where min <= Q <= max
+    weight = 1.0                    # weight in the merit (default 1)
+
+    [[targets]]
+    type = "colour"                 # CIELAB of the natural-light specular reflectance
+    lab = [60.0, 20.0, -30.0]       # target L*, a*, b* (or one triple per angle)
+    angle_deg = [0, 45]
+    illuminant = "D65"              # colour-science names: D65, D50, A, F2 ... (default D65)
+    observer = "2"                  # "2" (CIE 1931, default) or "10" (CIE 1964)
+    tolerance = 1.0                 # ΔE2000: passes where ΔE2000 <= tolerance at every angle
+    weight = 1.0                    # (step_nm = 5: the 380–780 nm colorimetry grid)
+
+    [optimizer]                     # optional
+    method = "scipy"                # L-BFGS-B within the bounds, exact gradients: "scipy" (default:
+                                    #   SciPy's, starts in turn, seconds to start) or "jaxopt" (starts
+                                    #   vmapped in one compiled solve: many starts, GPU)
+    starts = 8                      # the file's thicknesses plus 7 random starts (default 1)
+    seed = 0
+    max_steps = 500                 # iteration cap per start (default 500)
+    gradient_tolerance = 1e-9       # on the projected gradient (default 1e-9)
+
+    [optimizer.needle]              # optional: grow the design by the needle method
+    materials = [{ name = "SiO2", n = 1.46 }, { name = "TiO2", n = { material = "TiO2", source = "Sarkar" } }]
+    iterations = 3                  # needle insertions at most (default 3)
+    min_thickness_nm = 0.5          # thinner films are removed (default 0.5)
+    max_thickness_nm = 400          # bound of every film once needles are in (default: largest max)
+    max_layers = 12                 # optional cap
+    points_per_layer = 32           # needle-function samples per film (default 32)
+
+    [robustness]                    # optional: random thickness errors N(0, (sigma_nm + relative·d)²)
+    sigma_nm = 1.0
+    relative = 0.01
+    samples = 200                   # draws (default 200) → yield = fraction meeting every target
+    seed = 0
+    optimize = false                # true: minimise the mean merit over the draws (robust design)
+    min_yield = 0.9                 # optional requirement on the yield
+
+The merit is Σ weight · mean((Q − value)/tolerance)² over targets (one-sided bounds count only
+the excess; colour targets (ΔE2000/tolerance)²). With a needle table every coherent layer
+must be free (and no incoherent one): the needle method refines every thin film, first within
+the layers' own bounds, then in [0, max_thickness_nm]. Materials (layers and needle
+candidates) must cover every target's wavelengths.
+
+The output is a stack file (for :func:`load_stack`, ``layerstack predict``): the layers as
+written (database references kept, relative table paths rebased), plain designed thicknesses,
+needle layers named after their material, repeated names numbered; its ``#`` header holds the
+report — merit before and after, each target's result (mean/min/max of Q, Lab and ΔE2000) and
+the yield. ``layerstack design`` exits with status 0 when every target (and ``min_yield``) is
+met, 1 when not (the file is still written), 2 for a bad file.
+
 Spectra and wavelengths
 -----------------------
 :func:`save_spectra_csv` writes ``wavelength_nm`` and named columns; :func:`parse_wavelengths`
@@ -99,6 +178,7 @@ __all__ = [
     "load_fit_stack",
     "stack_from_dict",
     "stack_to_dict",
+    "save_stack",
     "read_csv_columns",
     "read_spectra_csv",
     "save_spectra_csv",
@@ -700,6 +780,98 @@ def stack_to_dict(stack: Stack) -> dict:
         _material_to_dict(stack.exit.index, "background", d["background"])
         d["background"]["rho_g"] = _spectrum_to_dict(stack.exit.reflectance, "background rho_g")
     return d
+
+
+# --------------------------------------------------------------------------- TOML writer
+_BARE_KEY = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
+
+
+def _toml_key(key) -> str:
+    key = str(key)
+    return key if key and set(key) <= _BARE_KEY else _toml_string(key)
+
+
+def _toml_string(text: str) -> str:
+    escapes = {'"': '\\"', "\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\b": "\\b", "\f": "\\f"}
+    out = []
+    for c in text:
+        if c in escapes:
+            out.append(escapes[c])
+        elif ord(c) < 0x20 or ord(c) == 0x7F:
+            out.append(f"\\u{ord(c):04X}")
+        else:
+            out.append(c)
+    return '"' + "".join(out) + '"'
+
+
+def _toml_value(x, what: str) -> str:
+    """One TOML value (inline: strings, booleans, finite numbers, arrays, inline tables)."""
+    if isinstance(x, (bool, np.bool_)):
+        return "true" if x else "false"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        if not math.isfinite(v):
+            raise LayerstackError(f"save_stack: {what} is not finite ({v!r})")
+        return repr(v)  # shortest round-trip representation
+    if isinstance(x, str):
+        return _toml_string(x)
+    if isinstance(x, np.ndarray):
+        x = x.tolist()
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v, what) for v in x) + "]"
+    if isinstance(x, Mapping):
+        if not x:
+            return "{}"
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in x.items()) + " }"
+    raise LayerstackError(f"save_stack: cannot write {what} of type {type(x).__name__}")
+
+
+def _toml_table(d: Mapping, what: str) -> list[str]:
+    return [f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in d.items()]
+
+
+def _dumps_stack(d: Mapping, header: str = "") -> str:
+    """A stack dict (schema in the module docstring, e.g. from :func:`stack_to_dict`) as TOML
+    text, ``header`` written first as ``#`` comment lines."""
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    if lines:
+        lines.append("")
+    for key, value in d.items():
+        if not isinstance(value, (Mapping, list)) or (isinstance(value, list) and key != "layers"):
+            lines.append(f"{_toml_key(key)} = {_toml_value(value, key)}")
+    for key in ("ambient", "layers", "substrate", "background"):
+        if key not in d:
+            continue
+        if key == "layers":
+            for layer in d["layers"]:
+                lines += ["", "[[layers]]", *_toml_table(layer, "layers")]
+        else:
+            lines += ["", f"[{key}]", *_toml_table(d[key], key)]
+    return "\n".join(lines) + "\n"
+
+
+def save_stack(path, stack, *, header: str = "") -> Path:
+    """Write a stack file (TOML) readable by :func:`load_stack`.
+
+    Args:
+        path: output file; missing parent directories are created.
+        stack: a :class:`Stack` (converted by :func:`stack_to_dict`: materials inline) or a dict
+            in the stack-file schema (kept as given, e.g. ``{ material = "Au" }`` references;
+            relative table file names must then be valid from the output's directory).
+        header: free text written first as ``#`` comment lines.
+    Returns the path written.
+    """
+    d = stack_to_dict(stack) if isinstance(stack, Stack) else stack
+    if not isinstance(d, Mapping):
+        raise LayerstackError(f"save_stack: expected a Stack or a dict, got {type(stack).__name__}")
+    text = _dumps_stack(d, header)
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 # ------------------------------------------------------------------ spectra, wavelengths

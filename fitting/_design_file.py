@@ -1,0 +1,821 @@
+r"""Design files: ``layerstack design DESIGN.toml -o design.toml``.
+
+A design file is a stack file (:mod:`layerstack_jax.io`) whose optimised layers carry
+``thickness_nm = { value = ..., free = true, min = ..., max = ... }``, plus ``[[targets]]``, an
+optional ``[optimizer]`` and an optional ``[robustness]`` table. The format is documented in the
+:mod:`layerstack_jax.io` docstring ("Design files").
+
+Data flow, one way:
+
+* :func:`load_design` — file → :class:`DesignFile` (the stack, which layers are free and their
+  bounds, :class:`DesignTarget` list built on :class:`~fitting.SpectralTarget` /
+  :class:`~fitting.ColourTarget`, optimizer, needle and robustness settings); every problem is a
+  :class:`~layerstack_jax.LayerstackError` naming the file, table and key;
+* :func:`run_design` — :func:`~fitting.optimize_thicknesses` (multi-start L-BFGS-B), then
+  optionally :func:`~fitting.needle_design` and a robust refinement, then the evaluation of
+  every target and the thickness-error yield (:func:`~fitting.thickness_yield`) →
+  :class:`DesignOutcome`;
+* :func:`design_report` (text), :func:`design_stack_dict` (the designed stack as a stack-file
+  dict keeping the materials as written, e.g. database references) and :func:`plot_design`.
+
+Pass/fail ("within spec"): a ``value`` target passes where :math:`|Q - \text{value}| \le`
+``tolerance`` at every wavelength and angle; a ``min`` / ``max`` target where
+:math:`\text{min} \le Q \le \text{max}` (the ``tolerance`` then only scales the merit); a colour
+target where ΔE2000 ≤ ``tolerance`` at every angle. The yield counts the thickness-error draws
+whose design passes every target.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+import tomllib
+from pathlib import Path
+from typing import Mapping, Optional
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import layerstack_jax as ls
+from layerstack_jax._stack import resolve
+from layerstack_jax import LayerstackError
+from layerstack_jax.io import _FREE_KEYS, _is_number, _material, _number, _reject_unknown, _Where, stack_from_dict
+
+from ._design import (
+    ColourTarget,
+    DesignResult,
+    RobustSpec,
+    SpectralTarget,
+    YieldResult,
+    merit,
+    needle_design,
+    optimize_thicknesses,
+    thickness_yield,
+    with_thicknesses,
+)
+
+__all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "TargetOutcome", "DesignOutcome", "load_design", "run_design",
+           "design_report", "design_stack_dict", "plot_design"]
+
+_DESIGN_KEYS = ("targets", "optimizer", "robustness")
+_SPECTRAL_KEYS = ("type", "name", "quantity", "wavelength_nm", "band_nm", "step_nm", "angle_deg", "polarization",
+                  "value", "min", "max", "tolerance", "weight")
+_COLOUR_KEYS = ("type", "name", "lab", "angle_deg", "illuminant", "observer", "step_nm", "tolerance", "weight")
+_OPTIMIZER_KEYS = ("method", "starts", "seed", "max_steps", "gradient_tolerance", "needle")
+_NEEDLE_KEYS = ("materials", "iterations", "min_thickness_nm", "max_thickness_nm", "max_layers", "points_per_layer")
+_ROBUST_KEYS = ("sigma_nm", "relative", "samples", "seed", "optimize", "min_yield")
+_DEFAULT_MAX_NM = 1000.0
+_BOUND_SLACK = 1e-9  # a min/max target passes up to this rounding slack
+_QUANTITY = {"R": "reflectance", "T": "transmittance", "A": "absorptance"}
+
+
+# ---------------------------------------------------------------------------- the model
+class DesignTarget(eqx.Module):
+    """One ``[[targets]]`` entry: the library targets it stands for.
+
+    ``parts``: the targets whose merits add up (a ``min`` + ``max`` band is a 'below' and an
+    'above' :class:`SpectralTarget`); ``checks``: the same with a one-sided bound's tolerance
+    shrunk to rounding, so that ``within_spec`` means min ≤ Q ≤ max; ``spec``: the pass
+    criterion in words.
+    """
+
+    name: str = eqx.field(static=True)
+    parts: tuple
+    checks: tuple
+    spec: str = eqx.field(static=True)
+
+    @property
+    def is_colour(self) -> bool:
+        return isinstance(self.parts[0], ColourTarget)
+
+
+@dataclasses.dataclass(frozen=True)
+class NeedleSettings:
+    """``[optimizer.needle]``: candidate materials (with their stack-file specs and names)."""
+
+    materials: tuple
+    names: tuple
+    specs: tuple  # stack-file entries {n[, k]} of the candidates
+    iterations: int
+    min_thickness_nm: float
+    max_thickness_nm: float
+    max_layers: Optional[int]
+    points_per_layer: int
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignFile:
+    """A parsed design file. Layers of ``stack`` are named by keys of ``layer_specs`` (``"L0"``,
+    ``"L1"``… for the file's layers, ``"N0"``… for needle materials) so that a designed stack,
+    however grown, maps back to the tables the file wrote."""
+
+    path: Path
+    description: str
+    stack: ls.Stack
+    raw: dict  # the stack part of the file (ambient, layers, substrate, description)
+    layer_specs: dict  # key -> (display name, stack-file layer table without thickness)
+    free: tuple
+    lower_nm: np.ndarray
+    upper_nm: np.ndarray
+    targets: tuple
+    method: str = "scipy"
+    starts: int = 1
+    seed: int = 0
+    max_steps: int = 500
+    gradient_tolerance: float = 1e-9
+    needle: Optional[NeedleSettings] = None
+    robustness: Optional[RobustSpec] = None
+    optimize_robust: bool = False
+    min_yield: Optional[float] = None
+
+    @property
+    def library_targets(self) -> list:
+        return [p for t in self.targets for p in t.parts]
+
+    @property
+    def check_targets(self) -> list:
+        return [c for t in self.targets for c in t.checks]
+
+
+# ------------------------------------------------------------------------------- parsing
+def _read(path: Path) -> dict:
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise LayerstackError(f"{path}: design file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise LayerstackError(f"{path}: invalid TOML: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise LayerstackError(f"{path}: cannot read design file: {e}") from None
+
+
+def _table(where: _Where, d: Mapping, key: str) -> Mapping:
+    t = d.get(key, {})
+    if not isinstance(t, Mapping):
+        raise where.error(f"must be a table [{key}], got {t!r}", key)
+    return t
+
+
+def _integer(where: _Where, key: str, x, minimum: int) -> int:
+    if not isinstance(x, int) or isinstance(x, bool) or x < minimum:
+        raise where.error(f"must be an integer >= {minimum}, got {x!r}", key)
+    return int(x)
+
+
+def _boolean(where: _Where, key: str, x) -> bool:
+    if not isinstance(x, bool):
+        raise where.error(f"must be true or false, got {x!r}", key)
+    return x
+
+
+def _string(where: _Where, key: str, x) -> str:
+    if not isinstance(x, str) or not x.strip():
+        raise where.error(f"must be a non-empty string, got {x!r}", key)
+    return x.strip()
+
+
+def _numbers(where: _Where, key: str, x, what: str) -> np.ndarray:
+    """A number or a non-empty list of finite numbers, as a 1-D array."""
+    values = [x] if _is_number(x) else x
+    if not isinstance(values, list) or not values or not all(_is_number(v) for v in values):
+        raise where.error(f"must be a number or a non-empty list of numbers ({what}), got {x!r}", key)
+    a = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise where.error(f"must be finite ({what}), got {x!r}", key)
+    return a
+
+
+def _angles(where: _Where, t: Mapping) -> np.ndarray:
+    a = _numbers(where, "angle_deg", t.get("angle_deg", 0.0), "angles of incidence in degrees")
+    if np.any(a < 0) or np.any(a >= 90):
+        raise where.error(f"angles must lie in [0, 90) degrees, got {a.tolist()}", "angle_deg")
+    return a
+
+
+def _grid(where: _Where, t: Mapping) -> np.ndarray:
+    """``wavelength_nm`` (number or list) or ``band_nm = [lo, hi]`` with ``step_nm``."""
+    if ("wavelength_nm" in t) == ("band_nm" in t):
+        raise where.error("give exactly one of wavelength_nm = 550 / [450, 550, 650] or band_nm = [lo, hi] "
+                          "(with step_nm)")
+    if "wavelength_nm" in t:
+        if "step_nm" in t:
+            raise where.error("step_nm goes with band_nm, not with wavelength_nm", "step_nm")
+        wl = _numbers(where, "wavelength_nm", t["wavelength_nm"], "nm")
+        if np.any(wl <= 0) or np.any(np.diff(wl) <= 0):
+            raise where.error(f"wavelengths must be > 0 nm and increase strictly, got {wl.tolist()}", "wavelength_nm")
+        return wl
+    band = _numbers(where, "band_nm", t["band_nm"], "[lo, hi] in nm")
+    if band.size != 2:
+        raise where.error(f"must be [lo, hi] in nm, got {t['band_nm']!r}", "band_nm")
+    lo, hi = band
+    if lo <= 0 or not hi > lo:
+        raise where.error(f"band inverted or empty: lo {lo:g} nm must be > 0 and < hi {hi:g} nm", "band_nm")
+    step = _number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
+    wl = lo + step * np.arange(int(math.floor((hi - lo) / step + 1e-9)) + 1)
+    return wl if abs(wl[-1] - hi) <= 1e-9 * hi else np.append(wl, hi)  # both band edges are targets
+
+
+def _per_wavelength(where: _Where, key: str, x, n_wl: int) -> np.ndarray:
+    v = _numbers(where, key, x, f"one number, or one per wavelength ({n_wl})")
+    if v.size not in (1, n_wl):
+        raise where.error(f"has {v.size} values for {n_wl} wavelengths", key)
+    if np.any(v < 0) or np.any(v > 1):
+        raise where.error(f"R, T and A are fractions in [0, 1] (not %), got {v.tolist()}", key)
+    return v if v.size > 1 else v[0]
+
+
+def _fmt_values(v) -> str:
+    return f"{float(v):g}" if np.ndim(v) == 0 else "profile"
+
+
+def _spectral_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
+    _reject_unknown(where, t, _SPECTRAL_KEYS)
+    quantity = t.get("quantity", "R")
+    if quantity not in _QUANTITY:
+        raise where.error(f"must be 'R', 'T' or 'A' (specular reflectance, transmittance, absorptance), "
+                          f"got {quantity!r}", "quantity")
+    polarization = t.get("polarization", "natural")
+    if polarization not in ("natural", "s", "p"):
+        raise where.error(f"must be 'natural', 's' or 'p', got {polarization!r}", "polarization")
+    wl = _grid(where, t)
+    angles = _angles(where, t)
+    tol = _number(where, "tolerance", t.get("tolerance", 0.01), positive=True)
+    weight = _number(where, "weight", t.get("weight", 1.0), positive=True)
+    given = [k for k in ("value", "min", "max") if k in t]
+    if not given:
+        raise where.error("missing: give value = ... (with tolerance) or min = ... and/or max = ...", "value")
+    if "value" in given and len(given) > 1:
+        raise where.error("give either value = ... (two-sided, ± tolerance) or min/max bounds, not both", "value")
+    v = {k: _per_wavelength(where, k, t[k], wl.size) for k in given}
+    if "min" in v and "max" in v and np.any(np.asarray(v["min"]) > np.asarray(v["max"])):
+        raise where.error("min must be <= max", "min")
+    common = dict(quantity=quantity, angle_deg=angles, polarization=polarization, weight=weight)
+    if "value" in v:
+        part = SpectralTarget(jnp.asarray(wl), v["value"], tol, kind="equal", **common)
+        return DesignTarget(name, (part,), (part,), f"{quantity} = {_fmt_values(v['value'])} ± {tol:g}")
+    parts, checks, spec = [], [], []
+    for key, kind, sign in (("min", "above", ">="), ("max", "below", "<=")):
+        if key in v:
+            parts.append(SpectralTarget(jnp.asarray(wl), v[key], tol, kind=kind, **common))
+            checks.append(SpectralTarget(jnp.asarray(wl), v[key], _BOUND_SLACK, kind=kind, **common))
+            spec.append(f"{quantity} {sign} {_fmt_values(v[key])}")
+    return DesignTarget(name, tuple(parts), tuple(checks), ", ".join(spec))
+
+
+def _colour_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
+    _reject_unknown(where, t, _COLOUR_KEYS)
+    if "lab" not in t:
+        raise where.error("missing: the target colour as [L*, a*, b*] (or one triple per angle)", "lab")
+    lab = t["lab"]
+    rows = lab if isinstance(lab, list) and lab and all(isinstance(r, list) for r in lab) else [lab]
+    if not all(isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in rows):
+        raise where.error(f"must be [L*, a*, b*] or a list of such triples (one per angle), got {lab!r}", "lab")
+    lab_a = np.asarray(rows, dtype=float)
+    if not np.all(np.isfinite(lab_a)) or np.any(lab_a[:, 0] < 0) or np.any(lab_a[:, 0] > 100):
+        raise where.error(f"L* must lie in [0, 100] and all values be finite, got {lab!r}", "lab")
+    angles = _angles(where, t)
+    if lab_a.shape[0] not in (1, angles.size):
+        raise where.error(f"{lab_a.shape[0]} Lab triples for {angles.size} angles", "lab")
+    step = _number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
+    lo, hi = ls.VISIBLE_RANGE_NM
+    wl = lo + step * np.arange(int(math.floor((hi - lo) / step + 1e-9)) + 1)
+    if abs(wl[-1] - hi) > 1e-9 * hi:
+        wl = np.append(wl, hi)
+    illuminant = _string(where, "illuminant", t.get("illuminant", "D65"))
+    observer = _string(where, "observer", str(t.get("observer", "2")))
+    try:
+        cs = ls.ColourSpace(wl, observer, illuminant)
+    except LayerstackError as e:
+        raise where.error(str(e), "observer" if "observer" in str(e) else "illuminant") from None
+    tol = _number(where, "tolerance", t.get("tolerance", 1.0), positive=True, what="ΔE2000")
+    weight = _number(where, "weight", t.get("weight", 1.0), positive=True)
+    part = ColourTarget(cs, lab_a if lab_a.shape[0] > 1 else lab_a[0], angles, tolerance=tol, weight=weight)
+    return DesignTarget(name, (part,), (part,), f"ΔE2000 <= {tol:g}")
+
+
+def _targets(source: str, d: Mapping) -> tuple:
+    raw = d.get("targets")
+    top = _Where(source, "top level")
+    if raw is None:
+        raise top.error("missing: add at least one [[targets]] table (what the design should achieve)", "targets")
+    if not isinstance(raw, list) or not raw or not all(isinstance(t, Mapping) for t in raw):
+        raise top.error("must be an array of tables, written [[targets]]", "targets")
+    out = []
+    for i, t in enumerate(raw):
+        name = t.get("name", f"target {i + 1}")
+        label = f"[[targets]] no. {i + 1}"
+        if not isinstance(name, str) or not name:
+            raise _Where(source, label).error(f"must be a non-empty string, got {name!r}", "name")
+        where = _Where(source, f"{label} ({name!r})" if "name" in t else label)
+        kind = t.get("type", "spectral")
+        if kind == "spectral":
+            out.append(_spectral_target(where, t, name))
+        elif kind in ("colour", "color"):
+            out.append(_colour_target(where, t, name))
+        else:
+            raise where.error(f"must be 'spectral' or 'colour', got {kind!r}", "type")
+    return tuple(out)
+
+
+def _free_thicknesses(source: str, raw_layers: list, declarations: list, stack: ls.Stack):
+    """Indices and bounds of the layers with ``thickness_nm = { ..., free = true }``."""
+    for decl in declarations:
+        if decl["kind"] != "thickness":
+            raise LayerstackError(f"{decl['where']}: {decl['name']} is free, but a design optimises layer thicknesses "
+                                  "only: mark thickness_nm free and give the others plain values")
+    free, lower, upper = [], [], []
+    for i, t in enumerate(raw_layers):
+        spec = t.get("thickness_nm")
+        if not (isinstance(spec, Mapping) and spec.get("free") is True):
+            continue
+        where = _Where(source, f"[[layers]] no. {i + 1} ({stack.layers[i].name!r})")
+        lo, hi = float(spec.get("min", 0.0)), float(spec.get("max", _DEFAULT_MAX_NM))
+        if lo < 0:
+            raise where.error(f"min must be >= 0 nm, got {lo:g}", "thickness_nm")
+        if not hi > lo:
+            raise where.error(f"bounds inverted or empty: min {lo:g} nm, max {hi:g} nm", "thickness_nm")
+        d = float(np.asarray(stack.layers[i].thickness))
+        if not lo <= d <= hi:
+            raise where.error(f"starting value {d:g} nm lies outside [min, max] = [{lo:g}, {hi:g}] nm", "thickness_nm")
+        free.append(i)
+        lower.append(lo)
+        upper.append(hi)
+    if not free:
+        raise LayerstackError(f"{source}: [[layers]]: key 'thickness_nm': no free layer: mark the layers to optimise "
+                              "with thickness_nm = { value = 100, free = true, min = 0, max = 400 }")
+    return tuple(free), np.asarray(lower), np.asarray(upper)
+
+
+def _needle(source: str, t, base_dir: Path, stack: ls.Stack, free: tuple, upper: np.ndarray) -> NeedleSettings:
+    where = _Where(source, "[optimizer.needle]")
+    if not isinstance(t, Mapping):
+        raise _Where(source, "[optimizer]").error(f"must be a table [optimizer.needle], got {t!r}", "needle")
+    _reject_unknown(where, t, _NEEDLE_KEYS)
+    raw = t.get("materials")
+    if not isinstance(raw, list) or not raw or not all(isinstance(m, Mapping) for m in raw):
+        raise where.error("must be a non-empty list of materials such as [{ name = \"SiO2\", n = 1.46 }, "
+                          "{ name = \"TiO2\", n = { material = \"TiO2\", source = \"Devore-o\" } }]", "materials")
+    materials, names, specs = [], [], []
+    for i, m in enumerate(raw):
+        mw = _Where(source, f"[optimizer.needle]: materials no. {i + 1}")
+        _reject_unknown(mw, m, ("name", "n", "k"))
+        materials.append(_material(mw, m, base_dir, allow_k=True, label=f"needle material {i + 1}"))
+        n = m.get("n")
+        default = (n.get("material") if isinstance(n, Mapping) and isinstance(n.get("material"), str)
+                   else f"n={n:g}" if _is_number(n) else f"needle material {i + 1}")
+        names.append(_string(mw, "name", m.get("name", default)))
+        specs.append({k: m[k] for k in ("n", "k") if k in m})
+    for i, layer in enumerate(stack.layers):
+        if layer.coherent != (i in free):
+            what = "coherent (a thin film) but its thickness is not free" if layer.coherent else "incoherent but free"
+            raise _Where(source, f"[[layers]] no. {i + 1} ({layer.name!r})").error(
+                f"is {what}: the needle method refines the thickness of every thin film and only those; mark each "
+                "coherent layer thickness_nm = { value = ..., free = true }", "thickness_nm")
+    max_nm = _number(where, "max_thickness_nm", t.get("max_thickness_nm", float(np.max(upper))), positive=True,
+                     what="nm")
+    if max_nm < np.max(upper):
+        raise where.error(f"must be >= every free layer's max ({np.max(upper):g} nm): it bounds all films once "
+                          "needles are in", "max_thickness_nm")
+    max_layers = t.get("max_layers")
+    return NeedleSettings(
+        materials=tuple(materials), names=tuple(names), specs=tuple(specs),
+        iterations=_integer(where, "iterations", t.get("iterations", 3), 1),
+        min_thickness_nm=_number(where, "min_thickness_nm", t.get("min_thickness_nm", 0.5), minimum=0.0, what="nm"),
+        max_thickness_nm=max_nm,
+        max_layers=None if max_layers is None else _integer(where, "max_layers", max_layers, len(stack.layers) + 2),
+        points_per_layer=_integer(where, "points_per_layer", t.get("points_per_layer", 32), 1),
+    )
+
+
+def _check_grids(source: str, stack: ls.Stack, targets: tuple, needle: Optional[NeedleSettings]) -> None:
+    """Every material covers every target's wavelengths (tables are never extrapolated)."""
+    for i, target in enumerate(targets):
+        part = target.parts[0]
+        wl = np.asarray(part.colour_space.wavelength_nm if target.is_colour else part.wavelength_nm)
+        candidates = zip(needle.names, needle.materials) if needle else ()
+        try:
+            resolve(stack, wl)
+            for name, m in candidates:
+                try:
+                    m(wl)
+                except LayerstackError as e:
+                    raise LayerstackError(f"needle material {name!r}: {e}") from None
+        except LayerstackError as e:
+            grid = f"wavelength grid {wl[0]:g}–{wl[-1]:g} nm"
+            raise LayerstackError(f"{source}: [[targets]] no. {i + 1}: {grid}: {e}") from None
+
+
+def _layer_spec(t: Mapping) -> dict:
+    """A file's layer table without its thickness and free-parameter keys."""
+    def plain(spec):
+        if isinstance(spec, Mapping) and any(k in spec for k in _FREE_KEYS):
+            return spec["value"] if "value" in spec else {k: v for k, v in spec.items() if k not in _FREE_KEYS}
+        return spec
+
+    return {k: plain(v) for k, v in t.items() if k not in ("thickness_nm", "name")}
+
+
+def load_design(path) -> DesignFile:
+    """Read a design file (format: :mod:`layerstack_jax.io` docstring, "Design files")."""
+    path = Path(path)
+    source = str(path)
+    d = _read(path)
+    raw = {k: v for k, v in d.items() if k not in _DESIGN_KEYS}
+    declarations: list = []
+    stack = stack_from_dict(raw, path.parent, source=source, free=declarations)
+    if not isinstance(stack.exit, ls.Substrate):
+        raise _Where(source, "[background]").error(
+            "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] "
+            "is not supported")
+    raw_layers = raw.get("layers", [])
+    free, lower, upper = _free_thicknesses(source, raw_layers, declarations, stack)
+    targets = _targets(source, d)
+
+    top = _Where(source, "top level")
+    opt = _table(top, d, "optimizer")
+    ow = _Where(source, "[optimizer]")
+    _reject_unknown(ow, opt, _OPTIMIZER_KEYS)
+    method = opt.get("method", "scipy")
+    if method not in ("scipy", "jaxopt"):
+        raise ow.error(f"must be 'scipy' (SciPy's L-BFGS-B, starts in turn) or 'jaxopt' (jaxopt's L-BFGS-B, "
+                       f"starts vmapped), got {method!r}", "method")
+    needle = _needle(source, opt["needle"], path.parent, stack, free, upper) if "needle" in opt else None
+    _check_grids(source, stack, targets, needle)
+
+    robust, optimize_robust, min_yield = None, False, None
+    if "robustness" in d:
+        rob = _table(top, d, "robustness")
+        rw = _Where(source, "[robustness]")
+        _reject_unknown(rw, rob, _ROBUST_KEYS)
+        sigma = _number(rw, "sigma_nm", rob.get("sigma_nm", 0.0), minimum=0.0, what="nm")
+        rel = _number(rw, "relative", rob.get("relative", 0.0), minimum=0.0, what="fraction of the thickness")
+        if sigma == 0 and rel == 0:
+            raise rw.error("give the thickness errors: sigma_nm (nm) and/or relative (fraction) > 0", "sigma_nm")
+        robust = RobustSpec(sigma, rel, _integer(rw, "samples", rob.get("samples", 200), 1),
+                            _integer(rw, "seed", rob.get("seed", 0), 0))
+        optimize_robust = _boolean(rw, "optimize", rob.get("optimize", False))
+        if "min_yield" in rob:
+            min_yield = _number(rw, "min_yield", rob["min_yield"], minimum=0.0, maximum=1.0, what="fraction")
+
+    keyed = [ls.Layer(layer.index, layer.thickness, coherent=layer.coherent, alpha=layer.alpha, name=f"L{i}")
+             for i, layer in enumerate(stack.layers)]
+    specs = {f"L{i}": (layer.name, _layer_spec(t)) for i, (layer, t) in enumerate(zip(stack.layers, raw_layers))}
+    if needle:
+        for m, (name, spec) in enumerate(zip(needle.names, needle.specs)):
+            specs[f"N{m}"] = (name, {**spec, "coherent": True})
+    description = d.get("description", "")
+    return DesignFile(
+        path=path, description=description, stack=ls.Stack(stack.ambient, keyed, stack.exit), raw=raw,
+        layer_specs=specs, free=free, lower_nm=lower, upper_nm=upper, targets=targets,
+        method=method,
+        starts=_integer(ow, "starts", opt.get("starts", 1), 1),
+        seed=_integer(ow, "seed", opt.get("seed", 0), 0),
+        max_steps=_integer(ow, "max_steps", opt.get("max_steps", 500), 1),
+        gradient_tolerance=_number(ow, "gradient_tolerance", opt.get("gradient_tolerance", 1e-9), positive=True),
+        needle=needle, robustness=robust, optimize_robust=optimize_robust, min_yield=min_yield,
+    )
+
+
+# ------------------------------------------------------------------------------- running
+@dataclasses.dataclass(frozen=True)
+class TargetOutcome:
+    """A target evaluated on the design: ``values`` ``(A, W)`` (spectral) or Lab ``(A, 3)``,
+    ``delta_e`` ``(A,)`` for colour targets, ``met`` the pass criterion."""
+
+    target: DesignTarget
+    values: np.ndarray
+    delta_e: Optional[np.ndarray]
+    merit: float
+    met: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignOutcome:
+    """Everything :func:`run_design` found (see :func:`design_report`)."""
+
+    design: DesignFile
+    stack: ls.Stack  # designed, layers named by layer_specs keys
+    initial_merit: float
+    merit: float
+    result: DesignResult  # of the last optimisation
+    history: list  # needle steps (empty without needle)
+    targets: tuple  # TargetOutcome per target
+    yield_: Optional[YieldResult]
+    seconds: float
+
+    @property
+    def met(self) -> bool:
+        """Every target within spec, and the yield reaches ``min_yield`` when one is required."""
+        ok = all(t.met for t in self.targets)
+        if self.design.min_yield is not None and self.yield_ is not None:
+            ok = ok and self.yield_.fraction >= self.design.min_yield
+        return ok
+
+
+def _merge_adjacent(stack: ls.Stack) -> ls.Stack:
+    """Adjacent coherent layers of the same material (a host split by a needle that then
+    vanished) become one layer of their summed thickness — optically the same stack."""
+    layers: list = []
+    for layer in stack.layers:
+        if layers and layer.coherent and layers[-1].coherent and layer.name == layers[-1].name:
+            total = float(np.asarray(layers[-1].thickness)) + float(np.asarray(layer.thickness))
+            layers[-1] = eqx.tree_at(lambda lay: lay.thickness, layers[-1], total)
+        else:
+            layers.append(eqx.tree_at(lambda lay: lay.thickness, layer, float(np.asarray(layer.thickness))))
+    return ls.Stack(stack.ambient, layers, stack.exit)
+
+
+def _of_thicknesses(stack: ls.Stack, fn):
+    """``fn(stack)`` compiled once as a function of the layer thicknesses (materials stay
+    constants): applies to every stack of the same layout. Op-by-op evaluation would compile
+    hundreds of small kernels instead."""
+    every = tuple(range(len(stack.layers)))
+    compiled = jax.jit(lambda d: fn(with_thicknesses(stack, every, d)))
+    return lambda st: compiled(jnp.asarray([float(np.asarray(layer.thickness)) for layer in st.layers]))
+
+
+def _summary(targets: tuple):
+    """stack → (total merit, per target: values, ΔE2000 or None, merit, within spec)."""
+    def summary(stack):
+        rows = []
+        for t in targets:
+            values = t.parts[0].evaluate(stack)
+            delta_e = ls.delta_e_2000(values, t.parts[0].lab) if t.is_colour else None
+            ok = jnp.all(jnp.stack([c.within_spec(stack) for c in t.checks]))
+            rows.append((values, delta_e, sum(p.merit(stack) for p in t.parts), ok))
+        return merit(stack, [p for t in targets for p in t.parts]), rows
+
+    return summary
+
+
+def _outcomes(targets: tuple, rows) -> tuple:
+    return tuple(
+        TargetOutcome(t, np.asarray(values, float), None if delta_e is None else np.asarray(delta_e, float).reshape(-1),
+                      float(m), bool(ok))
+        for t, (values, delta_e, m, ok) in zip(targets, rows)
+    )
+
+
+def run_design(design: DesignFile) -> DesignOutcome:
+    """Optimise the free thicknesses of ``design`` (multi-start L-BFGS-B), then grow it with
+    needles and refine it for thickness errors when asked; evaluate targets and yield."""
+    start_time = time.perf_counter()
+    targets = design.library_targets
+    robust = design.robustness if design.optimize_robust else None
+    summary = _of_thicknesses(design.stack, _summary(design.targets))
+    initial = float(summary(design.stack)[0])
+    result = optimize_thicknesses(
+        design.stack, targets, free=design.free, bounds_nm=(design.lower_nm, design.upper_nm),
+        n_starts=design.starts, seed=design.seed, maxiter=design.max_steps, tol=design.gradient_tolerance,
+        robust=None if design.needle else robust, method=design.method,
+    )
+    history: list = []
+    free = design.free
+    if design.needle:
+        nd = design.needle
+        bounds = (0.0, nd.max_thickness_nm)
+        result, history = needle_design(
+            result.stack, targets, list(nd.materials), iterations=nd.iterations, max_layers=nd.max_layers,
+            bounds_nm=bounds, points_per_layer=nd.points_per_layer, min_thickness_nm=nd.min_thickness_nm,
+            maxiter=design.max_steps, names=[f"N{m}" for m in range(len(nd.materials))], start=result,
+            method=design.method,
+        )
+        stack = _merge_adjacent(result.stack)
+        kept = [lay for lay in stack.layers if not (lay.coherent and float(lay.thickness) < nd.min_thickness_nm)]
+        if len(kept) < len(stack.layers) or robust is not None:
+            stack = _merge_adjacent(ls.Stack(stack.ambient, kept, stack.exit))
+            result = optimize_thicknesses(stack, targets, bounds_nm=bounds, maxiter=design.max_steps,
+                                          tol=design.gradient_tolerance, robust=robust, method=design.method)
+    stack = _merge_adjacent(result.stack)
+    if design.needle:
+        free = tuple(i for i, lay in enumerate(stack.layers) if lay.coherent)
+    if len(stack.layers) != len(design.stack.layers) or any(
+            a.name != b.name or a.coherent != b.coherent for a, b in zip(stack.layers, design.stack.layers)):
+        summary = _of_thicknesses(stack, _summary(design.targets))  # the needles changed the layout
+    final_merit, rows = summary(stack)
+    outcomes = _outcomes(design.targets, rows)
+    yield_ = None
+    if design.robustness is not None:
+        yield_ = thickness_yield(stack, design.check_targets, design.robustness, free=free)
+    return DesignOutcome(design, stack, initial, float(final_merit), result, history, outcomes, yield_,
+                         time.perf_counter() - start_time)
+
+
+# ------------------------------------------------------------------------------- reports
+def _layer_name(outcome: DesignOutcome, layer) -> str:
+    return outcome.design.layer_specs[layer.name][0]
+
+
+def _band(wl: np.ndarray) -> str:
+    if wl.size == 1:
+        return f"{wl[0]:g} nm"
+    return f"{wl[0]:g}–{wl[-1]:g} nm ({wl.size} wavelengths)"
+
+
+def _angles_text(a) -> str:
+    return ", ".join(f"{x:g}" for x in np.asarray(a).reshape(-1)) + "°"
+
+
+def _target_line(i: int, t: TargetOutcome) -> str:
+    part = t.target.parts[0]
+    verdict = "met" if t.met else "NOT met"
+    if t.target.is_colour:
+        labs = ", ".join(f"({L:.2f}, {a:.2f}, {b:.2f})" for L, a, b in t.values)
+        delta_e = ", ".join(f"{x:.4g}" for x in t.delta_e)
+        return (f"target {i} {t.target.name!r}: colour of R under {part.colour_space.illuminant}, "
+                f"{part.colour_space.observer.replace('Standard Observer', 'observer')}, "
+                f"at {_angles_text(part.angle_deg)}: Lab {labs}; ΔE2000 {delta_e}; spec {t.target.spec}: {verdict}")
+    q = part.quantity
+    pol = "" if part.polarization == "natural" else f" ({part.polarization}-polarized)"
+    v = t.values
+    stats = f"{q} = {v.mean():.6g}" if v.size == 1 else f"mean {q} {v.mean():.6g}, min {v.min():.6g}, max {v.max():.6g}"
+    return (f"target {i} {t.target.name!r}: {_QUANTITY[q]}{pol} at {_band(np.asarray(part.wavelength_nm))}, "
+            f"{_angles_text(part.angle_deg)}: {stats}; merit {t.merit:.6g}; spec {t.target.spec}: {verdict}")
+
+
+def design_report(outcome: DesignOutcome) -> list[str]:
+    """The design in a few lines: optimizer, merit before/after, layers, targets, yield."""
+    d, r = outcome.design, outcome.result
+    lines = [f"layerstack design of {d.path.name}" + (f": {d.description}" if d.description else "")]
+    starts = f"{d.starts} start{'s' if d.starts > 1 else ''}" + (f" (seed {d.seed})" if d.starts > 1 else "")
+    lines.append(f"optimizer: L-BFGS-B ({d.method}), {starts}; last refinement {r.message}")
+    if d.needle:
+        added = [d.needle.names[h["needle"][0]] for h in outcome.history[1:]]
+        merits = " -> ".join(f"{h['merit']:.6g}" for h in outcome.history)
+        lines.append(f"needle: {len(added)} insertion{'s' if len(added) != 1 else ''}"
+                     + (f" ({', '.join(added)})" if added else " (none lowered the merit)")
+                     + f" from candidates {', '.join(d.needle.names)}; merit {merits}")
+    lines.append(f"merit: {outcome.initial_merit:.6g} (start) -> {outcome.merit:.6g} (design)")
+    if d.optimize_robust and d.robustness is not None:
+        lines.append(f"robust optimisation: expected merit under thickness errors {r.merit:.6g}")
+    layers = []
+    for layer in outcome.stack.layers:
+        size = f"{float(layer.thickness):.2f} nm"
+        layers.append(f"{_layer_name(outcome, layer)} {size}" + ("" if layer.coherent else " (incoherent)"))
+    lines.append(f"layers ({len(layers)}, from the ambient): " + (" | ".join(layers) if layers else "none"))
+    for i, t in enumerate(outcome.targets, 1):
+        lines.append(_target_line(i, t))
+    if outcome.yield_ is not None:
+        rs = d.robustness
+        errors = " + ".join(x for x in (f"{rs.sigma_nm:g} nm" if rs.sigma_nm else "",
+                                        f"{100 * rs.relative:g} %" if rs.relative else "") if x)
+        need = "" if d.min_yield is None else (
+            f"; required >= {100 * d.min_yield:g} %: {'met' if outcome.yield_.fraction >= d.min_yield else 'NOT met'}")
+        lines.append(f"yield: {100 * outcome.yield_.fraction:.4g} % of {rs.samples} draws within spec "
+                     f"(thickness errors σ = {errors}, seed {rs.seed}){need}")
+    lines.append("result: " + ("all targets met" if outcome.met else "targets NOT met"))
+    return lines
+
+
+# ---------------------------------------------------------------------------- the result file
+def _rebase_tables(x, base_dir: Path, out_dir: Path):
+    """Relative ``table = "file.csv"`` names, valid from ``base_dir``, made valid from ``out_dir``
+    (relative when the two share a directory below the root, absolute otherwise)."""
+    if isinstance(x, Mapping):
+        out = {}
+        for k, v in x.items():
+            if k == "table" and isinstance(v, str) and not Path(v).is_absolute():
+                table, here = (base_dir / v).resolve(), out_dir.resolve()
+                shared = Path(os.path.commonpath([table, here]))
+                v = str(table) if shared == Path(shared.anchor) else os.path.relpath(table, here)
+            out[k] = _rebase_tables(v, base_dir, out_dir)
+        return out
+    if isinstance(x, list):
+        return [_rebase_tables(v, base_dir, out_dir) for v in x]
+    return x
+
+
+def design_stack_dict(outcome: DesignOutcome, out_dir=".") -> dict:
+    """The designed stack as a stack-file dict: the file's ambient and substrate, every layer's
+    table as written (database references kept) with its designed thickness (plain number);
+    needle layers named after their material; repeated names numbered."""
+    d = outcome.design
+    names = [_layer_name(outcome, layer) for layer in outcome.stack.layers]
+    seen: dict = {}
+    layers = []
+    for layer, name in zip(outcome.stack.layers, names):
+        if names.count(name) > 1:
+            seen[name] = seen.get(name, 0) + 1
+            name = f"{name} {seen[name]}"
+        spec = d.layer_specs[layer.name][1]
+        layers.append({"name": name, **{k: v for k, v in spec.items() if k in ("n", "k")},
+                       "thickness_nm": float(layer.thickness),
+                       **{k: v for k, v in spec.items() if k not in ("n", "k")}})
+    out: dict = {}
+    if d.description:
+        out["description"] = d.description
+    if "ambient" in d.raw:
+        out["ambient"] = d.raw["ambient"]
+    out["layers"] = layers
+    out["substrate"] = d.raw["substrate"]
+    return _rebase_tables(out, d.path.parent, Path(out_dir))
+
+
+# ---------------------------------------------------------------------------------- plot
+def _lab_to_xyz(lab: np.ndarray, white: np.ndarray) -> np.ndarray:
+    """CIE 15:2004 eqs. (8.4)–(8.6) inverted: CIELAB → XYZ on the white's scale."""
+    L, a, b = np.moveaxis(np.asarray(lab, float), -1, 0)
+    fy = (L + 16.0) / 116.0
+    f = np.stack([fy + a / 500.0, fy, fy - b / 200.0], axis=-1)
+    delta = 6.0 / 29.0
+    return np.asarray(white) * np.where(f > delta, f**3, 3 * delta**2 * (f - 4.0 / 29.0))
+
+
+def _plot_grid(stack: ls.Stack, wl: np.ndarray) -> np.ndarray:
+    """A dense grid around a target's band (±10 %, or ±20 % around one wavelength), kept inside
+    the materials' data ranges."""
+    lo, hi = float(wl[0]), float(wl[-1])
+    pad = 0.1 * (hi - lo) if hi > lo else 0.2 * lo
+    for a, b in ((max(lo - pad, 1.0), hi + pad), (lo, hi)):
+        grid = np.linspace(a, b, 301) if b > a else np.array([a])
+        try:
+            resolve(stack, grid)
+            return grid
+        except LayerstackError:
+            continue
+    return np.asarray(wl)
+
+
+def plot_design(outcome: DesignOutcome, path, *, title: str = "") -> Path:
+    """PNG: each spectral target (design solid, start dashed, the spec shaded) and, for colour
+    targets, swatches of the target and the design colour with their ΔE2000."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    spectral = [t for t in outcome.targets if not t.target.is_colour]
+    colour = [t for t in outcome.targets if t.target.is_colour]
+    rows = len(spectral) + (1 if colour else 0)
+    fig = Figure(figsize=(8, 3.0 * rows + 0.6), dpi=110, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, squeeze=False)[:, 0]
+    start = outcome.design.stack
+    for ax, t in zip(axes, spectral):
+        part = t.target.parts[0]
+        wl = np.asarray(part.wavelength_nm)
+        grid = _plot_grid(outcome.stack, wl)
+        probe = SpectralTarget(jnp.asarray(grid), 0.0, quantity=part.quantity, angle_deg=part.angle_deg,
+                               polarization=part.polarization)
+        evaluate = _of_thicknesses(outcome.stack, probe.evaluate)
+        design_q = np.asarray(evaluate(outcome.stack))
+        if [lay.name for lay in start.layers] != [lay.name for lay in outcome.stack.layers]:
+            evaluate = _of_thicknesses(start, probe.evaluate)  # needles changed the layout
+        start_q = np.asarray(evaluate(start))
+        for a, angle in enumerate(np.asarray(part.angle_deg)):
+            style = dict(marker="o", ms=4) if grid.size == 1 else {}
+            ax.plot(grid, design_q[a], "-", color=f"C{a}", lw=1.8, label=f"design {angle:g}°", **style)
+            ax.plot(grid, start_q[a], "--", color=f"C{a}", lw=1.0, alpha=0.6, label=f"start {angle:g}°", **style)
+        for p in t.target.parts:
+            v = np.broadcast_to(np.asarray(p.value, float), wl.shape)
+            if p.kind == "equal":
+                tol = float(np.max(np.asarray(p.tolerance)))
+                lo, hi = np.clip(v - tol, 0.0, 1.0), np.clip(v + tol, 0.0, 1.0)
+                if wl.size <= 5:  # a few wavelengths: bars; a band: a shaded corridor
+                    ax.errorbar(wl, v, yerr=(v - lo, hi - v), fmt="ks", ms=4, capsize=5, label="target ± tolerance")
+                else:
+                    ax.fill_between(wl, lo, hi, color="k", alpha=0.12, label="target ± tolerance")
+                    ax.plot(wl, v, "k.", ms=4)
+            else:
+                ax.plot(wl, v, "k" + ("v" if p.kind == "below" else "^"), ms=5,
+                        label=f"{'max' if p.kind == 'below' else 'min'}")
+        ax.set_xlabel("wavelength (nm)")
+        ax.set_ylabel(f"{part.quantity} ({_QUANTITY[part.quantity]})")
+        ax.set_ylim(bottom=0.0)
+        ax.set_xlim(float(grid[0]) - (grid.size == 1), float(grid[-1]) + (grid.size == 1))
+        ax.grid(True, alpha=0.3)
+        pol = "" if part.polarization == "natural" else f", {part.polarization}-polarized"
+        ax.set_title(f"{t.target.name}{pol}: {t.target.spec} — {'met' if t.met else 'NOT met'}", fontsize=10)
+        ax.legend(loc="best", frameon=False, fontsize=8)
+    if colour:
+        ax = axes[-1]
+        x = 0.0
+        for t in colour:
+            part = t.target.parts[0]
+            cs = part.colour_space
+            target_lab = np.broadcast_to(np.asarray(part.lab), t.values.shape)
+            target_rgb = np.asarray(cs.XYZ_to_sRGB(_lab_to_xyz(target_lab, np.asarray(cs.white_XYZ)), clip=True))
+            design_rgb = np.asarray(cs.XYZ_to_sRGB(_lab_to_xyz(t.values, np.asarray(cs.white_XYZ)), clip=True))
+            for a, angle in enumerate(np.asarray(part.angle_deg)):
+                ax.add_patch(Rectangle((x, 0.5), 1.0, 1.0, color=np.clip(target_rgb[a], 0, 1)))
+                ax.add_patch(Rectangle((x, -0.5), 1.0, 1.0, color=np.clip(design_rgb[a], 0, 1)))
+                ax.text(x + 0.5, -0.75, f"{t.target.name}\n{angle:g}°  ΔE00 {t.delta_e[a]:.2f}", ha="center",
+                        va="top", fontsize=8)
+                x += 1.3
+        ax.text(-0.1, 1.0, "target", ha="right", va="center", fontsize=9)
+        ax.text(-0.1, 0.0, "design", ha="right", va="center", fontsize=9)
+        ax.set_xlim(-0.9, max(x, 1.3))
+        ax.set_ylim(-1.6, 1.6)
+        ax.set_aspect("equal")
+        ax.axis("off")
+        ax.set_title("colour targets (sRGB, clipped to the gamut)", fontsize=10)
+    fig.suptitle(title or f"design of {outcome.design.path.name}: merit {outcome.initial_merit:.3g} → "
+                 f"{outcome.merit:.3g}", fontsize=11)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path

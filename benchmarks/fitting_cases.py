@@ -3,7 +3,8 @@
 * F1 — 1,000 independent fits of 401-point spectra (380–780 nm): thickness of the top layer +
   3 B-spline coefficients of the middle layer's α(λ), ρg known; 3 incoherent layers over a
   Lambertian background, integrating sphere (8°, SCE). One :func:`fitting.fit_batch` call
-  (chunks of 100, vmapped Levenberg–Marquardt); wall time includes compilation.
+  (chunks of 100, solved in vmapped blocks of 4), once with Levenberg–Marquardt (the default)
+  and once with Gauss–Newton; wall time includes compilation.
 * F2 — joint calibration fit: 5 samples × 401 λ (45°/0°), α(λ) and ρg(λ) on 20-coefficient
   B-spline bases, 5 per-sample thicknesses (the first one known: α·h degeneracy), time to converge
   (compile included, and again with the compiled solver). F2b: the same with ρg fixed to the
@@ -41,7 +42,7 @@ def _f1_stack(h_top, alpha_mid):
     ], ls.LambertianBackground(1.5, 0.15 + 0.6 / (1 + np.exp(-(WL - 560.0) / 25.0))))
 
 
-def f1(n: int, chunk: int) -> dict:
+def f1(n: int, chunk: int, method: str = "lm") -> dict:
     B = fitting.bspline_basis(WL, 3)
     rng = np.random.default_rng(1)
     geometry = ls.Sphere(8.0)
@@ -55,10 +56,10 @@ def f1(n: int, chunk: int) -> dict:
     obj = fitting.Objective(_f1_stack(20_000.0, B @ np.full(3, 1e-5)), WL, fitting.Dataset(geometry, data[0], sigma=SIGMA),
                             [fitting.thickness("top"), fitting.alpha("ink", basis=B, value=np.full(3, 1e-5))])
     t0 = time.perf_counter()
-    b = fitting.fit_batch(obj, data, chunk_size=chunk)
+    b = fitting.fit_batch(obj, data, method=method, chunk_size=chunk)
     wall = time.perf_counter() - t0
     err_h = np.abs(b.values["thickness[top]"] - h) / b.errors["thickness[top]"]
-    return {"case": "F1", "what": f"{n} independent fits, 401 λ, h + 3 α coefficients, 3 incoherent layers, sphere",
+    return {"case": f"F1 ({method})", "what": f"{n} independent fits, 401 λ, h + 3 α coefficients, 3 incoherent layers, sphere",
             "wall_s": wall, "converged": f"{int(b.converged.sum())}/{n}",
             "note": f"median steps {np.median(b.num_steps):g}; |h−h_true|/σ_h median {np.median(err_h):.2f}; "
                     f"data generation {t_data:.1f} s (not counted)"}
@@ -103,12 +104,13 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--n", type=int, default=1000, help="number of F1 fits (default 1000)")
     p.add_argument("--chunk", type=int, default=100, help="F1 chunk size (default 100)")
+    p.add_argument("--f1-methods", default="lm,gauss-newton", help="solvers for F1, comma-separated")
     p.add_argument("--method", default="lm", help="solver for F2/F2b (default lm; lbfgsb for α on its bound)")
     p.add_argument("--only", choices=("F1", "F2", "F2b"), help="run one case")
     a = p.parse_args(argv)
     rows = []
     if a.only in (None, "F1"):
-        rows.append(f1(a.n, a.chunk))
+        rows.extend(f1(a.n, a.chunk, m) for m in a.f1_methods.split(","))
     if a.only in (None, "F2"):
         rows.append(f2(method=a.method))
     if a.only in (None, "F2b"):

@@ -318,7 +318,12 @@ def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.
             idx = comp[layout.owner[comp] == i]
             ws = w[idx]
             name = layout.params[i].name
-            if np.allclose(ws, ws[0], rtol=0.05, atol=0.02) and idx.size == layout.free_count[i]:
+            # all free components of the parameter, also those too weak to stand out in the
+            # normalised v (e.g. α where the layer barely absorbs): if they all move with the
+            # strong ones by the same relative amount, the whole parameter is involved (α·h)
+            every = np.nonzero((layout.owner == i) & ~norms_zero)[0]
+            if np.allclose(w[every], ws[0], rtol=0.05, atol=0.02):
+                involved[every] = True
                 groups.append((name, float(ws[0])))
             else:
                 groups += [(layout.names[c], float(w[c])) for c in idx]

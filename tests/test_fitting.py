@@ -196,6 +196,26 @@ def test_non_identifiable_alpha_times_thickness_is_named():
     assert d["identifiability"]["non_identifiable"][0]["parameters"] == item["parameters"]
 
 
+def test_non_identifiable_spectral_alpha_names_the_whole_parameter():
+    """α(λ) on a basis and h: the null direction moves every α coefficient with h, also those
+    where the slab barely absorbs (weak columns of the Jacobian). The report names α·h, and no
+    α coefficient gets a standard error (each one is arbitrary along the null direction)."""
+    basis = ft.bspline_basis(WL, 6)
+    coefficients = np.array([3e-5, 1e-5, 2e-6, 3e-7, 1e-7, 5e-8])  # αh from 0.3 (blue) to 5e-4 (red)
+    y = np.asarray(ls.reflectance(_slab(10_000.0, basis @ coefficients), WL, T0))
+    obj = ft.Objective(_slab(8_000.0, 1e-5), WL, ft.Dataset(T0, y),
+                       [ft.thickness("slab"), ft.alpha("slab", basis=basis, value=np.full(6, 1e-5))])
+    r = ft.fit(obj)
+    assert r.converged and r.rank == 6
+    (item,) = r.non_identifiable
+    assert set(item["parameters"]) == {"thickness[slab]", "alpha[slab]"}
+    assert "only thickness[slab]·alpha[slab] is determined" in item["combination"]
+    assert np.all(np.isnan(r.x_stderr))
+    # the products α_j·h are what the data fix
+    np.testing.assert_allclose(r.values["alpha[slab]"] * r.values["thickness[slab]"], coefficients * 10_000.0,
+                               rtol=1e-6)
+
+
 def test_second_fit_with_other_data_does_not_retrace(monkeypatch):
     """One compiled shape per model: fitting new data reuses the compiled solve (guarded by
     eqx.debug.assert_max_traces on the statistics, traced once per compilation)."""

@@ -32,7 +32,6 @@
 # Units: nm for wavelengths and thicknesses; normal incidence throughout.
 
 # %%
-import inspect
 import os
 from pathlib import Path
 
@@ -62,8 +61,7 @@ def save(fig, name):
 # SciPy's L-BFGS-B on the host (method="scipy") starts in a second: only the merit and its
 # gradient are compiled. The default, jaxopt's L-BFGS-B (all starts in one vmapped solve), spends
 # ~10 s compiling for every new design shape — worth it for many starts or on an accelerator.
-SOLVER = {"method": "scipy"} if "method" in inspect.signature(fitting.optimize_thicknesses).parameters else {}
-print(f"design solver: {SOLVER.get('method', 'jaxopt')}")
+SOLVER = {"method": "scipy"}
 
 # %% [markdown]
 # ## An independent reference: characteristic matrices

@@ -182,6 +182,9 @@ class Ellipsometric(Geometry):
     ``quantity``: ``'psi'`` or ``'delta'`` (degrees, conventions of :func:`ellipsometry`), or the
     wrap-free ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (better fitting
     targets: Δ jumps at ±180°).
+
+    ``angle_deg``: scalar or array ``(*angle)`` of incidence angles in degrees; :meth:`measure`
+    returns ``(*angle, wl)`` (ψ, Δ in degrees; N, C, S dimensionless).
     """
 
     angle_deg: object = 70.0

@@ -255,6 +255,10 @@ class Optics(eqx.Module):
     ``diffuse`` at the back-side hemispherical nodes (over a background) with their ``weights``;
     ``index`` and ``films``: the indices and coherent-film thicknesses they were made with
     (checked against the stack when both are concrete).
+
+    Everything is on the wavelength grid ``(wl,)`` (nm) it was made for: the Fresnel arrays
+    carry the geometry's angle axes ``(*angle)`` and, for ``diffuse``, a node axis; the values
+    are dimensionless (amplitude and intensity ratios; μ = sin²θ nodes and weights).
     """
 
     geometry: Geometry
@@ -297,6 +301,7 @@ def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int 
 
     Valid for any stack with the same structure, indices and coherent-film thicknesses: only
     thick-layer thicknesses, α and ρg may differ when it is passed to :func:`reflectance`.
+    The grid ``wavelength_nm`` ``(wl,)`` must be the one later passed to :func:`reflectance`.
     """
     rs = resolve(stack, wavelength_nm)
     return _optics_resolved(rs, isinstance(stack.exit, LambertianBackground), geometry, nodes)

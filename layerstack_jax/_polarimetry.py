@@ -98,9 +98,9 @@ _STATES = {
 
 
 def stokes(state: str):
-    """Unit-intensity Stokes vector ``(4, 1)`` (broadcasts over wavelength) of a named state:
-    'unpolarized', 's', 'p', '+45', '-45', 'R' (V = +1), 'L' (V = −1). Dimensionless
-    (I = 1); multiply by an intensity for other scales."""
+    """Unit-intensity Stokes vector of shape ``(4, 1)`` (broadcasts over wavelength) of a named
+    state: 'unpolarized', 's', 'p', '+45', '-45', 'R' (V = +1), 'L' (V = −1). The components are
+    dimensionless (I = 1); multiply by an intensity for other scales."""
     try:
         return jnp.asarray(_STATES[state])[:, None]
     except KeyError:
@@ -329,7 +329,7 @@ def coherency_matrix(M):
     (Cloude 1986) of a Mueller matrix ``(*batch, 4, 4, wl)``; returns ``(*batch, wl, 4, 4)``
     Hermitian with :math:`\operatorname{tr} H = m_{00}`. For a pure (Jones) Mueller matrix H is
     rank one; M is a convex sum of Jones systems (physically realizable) iff H ⪰ 0.
-    Dimensionless, like M."""
+    The elements are dimensionless, like M."""
     sig = jnp.asarray(PAULI)
     basis = jnp.einsum("kab,lcd->klacbd", sig, jnp.conj(sig)).reshape(4, 4, 4, 4)
     return 0.25 * jnp.einsum("...klw,klij->...wij", jnp.asarray(M), basis)

@@ -178,7 +178,11 @@ def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1
                      *, nodes: Optional[int] = None) -> np.ndarray:
     """Intrinsic reflectance ρg of a bare Lambertian background (index ``n_g``) from its
     measured spectrum — Simonot eq. 86 (sphere) or 87 (radiance detector), through
-    :func:`layerstack_jax.invert_background` — clipped to [0, 1] and checked."""
+    :func:`layerstack_jax.invert_background` — clipped to [0, 1] and checked.
+
+    ``wavelength_nm`` (nm) and ``measured`` both ``(wl,)``; ``measured`` as the geometry reads it
+    (a dimensionless reflectance (factor), or 1/sr for :class:`~layerstack_jax.BRDF`). Returns
+    ρg ``(wl,)``, a dimensionless fraction."""
     y = np.asarray(measured, dtype=float)
     wl = np.asarray(wavelength_nm, dtype=float)
     if y.shape != wl.shape:

@@ -231,7 +231,7 @@ class DesignResult(NamedTuple):
     layer indices; ``merit`` and ``initial_merit``: merit of the best design and of the start;
     ``start_merits``: final merit of every start ``(S,)``; ``n_steps``: iterations of the best
     start; ``converged``: the best start met the tolerance before ``maxiter``; ``message``.
-Merits are dimensionless scalars (see :func:`merit`).
+    Merits are dimensionless scalars (see :func:`merit`).
     """
 
     stack: ls.Stack
@@ -378,7 +378,7 @@ class NeedleScan(NamedTuple):
     layer); ``fraction``: ``(P,)`` depth inside that layer as a fraction of its thickness, from
     the side of the ambient; ``derivative``: ``(M, P)`` dM/dt at t = 0 for each candidate
     material ``M`` (negative: a needle helps), in 1/nm (dimensionless merit per nm of needle);
-``fraction`` is dimensionless.
+    ``fraction`` is dimensionless.
     """
 
     layer: np.ndarray

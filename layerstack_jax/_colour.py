@@ -79,7 +79,7 @@ __all__ = [
     "srgb_encode",
 ]
 
-#: The visible range the data grid must cover (CIE 15:2004 §7.2): ``(min, max)`` in nm.
+#: The visible range the data grid must cover (CIE 15:2004 §7.2): two scalars ``(min, max)`` in nm.
 VISIBLE_RANGE_NM = (380.0, 780.0)
 
 #: Observer names accepted by :class:`ColourSpace` → colour-science's table name.

@@ -175,9 +175,11 @@ def entry(name: str, gaps: list[str]) -> list[str]:
     return lines
 
 
-# Names for which units/shapes make no sense (errors, abstract bases, parsers of text).
+# Names for which units/shapes make no sense (errors, abstract bases, parsers of text, name
+# tables and database look-ups that return only strings).
 _NO_UNITS_EXPECTED = {"LayerstackError", "Geometry", "Material", "parse_geometry", "read_csv_columns",
-                      "stack_to_dict", "DEFAULT_NODES", "Stack"}
+                      "stack_to_dict", "DEFAULT_NODES", "Stack", "OBSERVERS", "database_version",
+                      "material_sources"}
 
 
 def _constant_source(name: str) -> Path:

@@ -45,6 +45,10 @@ class BatchResult:
         converged: ``(N,)`` bool; result_code ``(N,)``; num_steps ``(N,)``;
         chi2, reduced_chi2: ``(N,)``; rank: ``(N,)`` of the normalised Jacobian;
         covariance_scaled: True if uncertainties are scaled by each fit's reduced χ².
+        wall_time_s: wall-clock time of the batch, seconds.
+
+    Values and errors are in each parameter's own unit (nm for thicknesses, 1/nm for α,
+    dimensionless for n and ρg); χ² values are dimensionless.
     """
 
     objective: Objective
@@ -126,6 +130,10 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             of the same compiled function.
         progress: a callback ``f(done, total)`` called after each chunk, or True for a
             progress bar (tqdm if installed, else a line on stderr).
+
+    Data are in the unit each dataset's geometry reads (a dimensionless reflectance or
+    reflectance factor, 1/sr for BRDF, degrees for ψ/Δ). Returns a :class:`BatchResult` with
+    parameters in their own units (nm, 1/nm, dimensionless).
     """
     import time
 
@@ -178,7 +186,11 @@ def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1
                      *, nodes: Optional[int] = None) -> np.ndarray:
     """Intrinsic reflectance ρg of a bare Lambertian background (index ``n_g``) from its
     measured spectrum — Simonot eq. 86 (sphere) or 87 (radiance detector), through
-    :func:`layerstack_jax.invert_background` — clipped to [0, 1] and checked."""
+    :func:`layerstack_jax.invert_background` — clipped to [0, 1] and checked.
+
+    ``wavelength_nm`` (nm) and ``measured`` both ``(wl,)``; ``measured`` as the geometry reads it
+    (a dimensionless reflectance (factor), or 1/sr for :class:`~layerstack_jax.BRDF`). Returns
+    ρg ``(wl,)``, a dimensionless fraction."""
     y = np.asarray(measured, dtype=float)
     wl = np.asarray(wavelength_nm, dtype=float)
     if y.shape != wl.shape:

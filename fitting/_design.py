@@ -59,8 +59,9 @@ class SpectralTarget(eqx.Module):
     """A spectral design target.
 
     Attributes:
-        wavelength_nm: ``(W,)`` wavelengths in nm.
-        value: target values, broadcastable to ``(A, W)`` (A = number of angles).
+        wavelength_nm: wavelengths in nm, shape ``(W,)``.
+        value: target values (R, T, A are dimensionless fractions), broadcastable to shape
+            ``(A, W)`` (A = number of angles).
         tolerance: tolerance (> 0) of each point, broadcastable to ``(A, W)``: deviations are
             measured in units of it.
         quantity: ``'R'`` (reflectance), ``'T'`` (transmittance into the exit medium) or ``'A'``
@@ -143,7 +144,7 @@ class ColourTarget(eqx.Module):
 
     Attributes:
         colour_space: a :class:`layerstack_jax.ColourSpace` (its grid is the evaluation grid).
-        lab: ``(3,)`` or ``(A, 3)`` target L*, a*, b*.
+        lab: target L*, a*, b* (CIELAB, dimensionless), shape ``(3,)`` or ``(A, 3)``.
         angle_deg: ``(A,)`` angles of incidence, degrees.
         tolerance: ΔE2000 counted as one unit of deviation (within spec: ΔE2000 ≤ tolerance).
         weight: weight in the merit.
@@ -183,7 +184,8 @@ class ColourTarget(eqx.Module):
 
 def merit(stack: ls.Stack, targets: Sequence):
     """Total merit of ``stack`` against ``targets`` (:class:`SpectralTarget`,
-    :class:`ColourTarget`): the sum of their ``merit``."""
+    :class:`ColourTarget`): the sum of their ``merit`` — each a weighted mean of squared
+    deviations in units of the target's tolerance, so a dimensionless scalar."""
     if not targets:
         raise LayerstackError("design needs at least one target")
     return sum(t.merit(stack) for t in targets)
@@ -225,10 +227,11 @@ def _bounds(bounds, n_free: int):
 class DesignResult(NamedTuple):
     """Outcome of a thickness optimisation.
 
-    ``stack``: the best design; ``thickness_nm``: its free thicknesses ``(F,)``; ``free``: their
+    ``stack``: the best design; ``thickness_nm``: its free thicknesses in nm, shape ``(F,)``; ``free``: their
     layer indices; ``merit`` and ``initial_merit``: merit of the best design and of the start;
     ``start_merits``: final merit of every start ``(S,)``; ``n_steps``: iterations of the best
     start; ``converged``: the best start met the tolerance before ``maxiter``; ``message``.
+    Merits are dimensionless scalars (see :func:`merit`).
     """
 
     stack: ls.Stack
@@ -371,10 +374,11 @@ def optimize_thicknesses(
 class NeedleScan(NamedTuple):
     """Needle function sampled at candidate insertion points.
 
-    ``layer``: ``(P,)`` index of the layer that would be split (``-1``: on top of the first
+    ``layer``: shape ``(P,)``, index of the layer that would be split (``-1``: on top of the first
     layer); ``fraction``: ``(P,)`` depth inside that layer as a fraction of its thickness, from
     the side of the ambient; ``derivative``: ``(M, P)`` dM/dt at t = 0 for each candidate
-    material ``M`` (negative: a needle helps).
+    material ``M`` (negative: a needle helps), in 1/nm (dimensionless merit per nm of needle);
+    ``fraction`` is dimensionless.
     """
 
     layer: np.ndarray
@@ -428,6 +432,9 @@ def needle_function(
     Exact derivatives (reverse-mode autodiff at zero needle thickness). The candidate stacks are
     batched by pytree structure and differentiated in one vmapped call per structure — a single
     compilation when all targets share one wavelength grid (materials are then sampled on it).
+
+    Returns a :class:`NeedleScan` with ``derivative`` of shape ``(M, P)`` in 1/nm (M candidate
+    materials, P insertion points).
     """
     if not materials:
         raise LayerstackError("needle_function needs at least one candidate material")
@@ -464,7 +471,8 @@ def insert_needle(stack: ls.Stack, scan: NeedleScan, materials: Sequence, thickn
 
     The needle layer is named ``names[m]`` for material ``m`` (default ``"needle"``).
     Returns ``(new_stack, (material_index, layer, fraction, derivative))`` or ``(stack, None)``
-    when no point has a negative derivative (the design is needle-optimal).
+    when no point has a negative derivative (the design is needle-optimal). ``layer`` and
+    ``material_index`` are ints, ``fraction`` (dimensionless) and ``derivative`` (1/nm) scalars.
     """
     m, p = np.unravel_index(int(np.argmin(scan.derivative)), scan.derivative.shape)
     if scan.derivative[m, p] >= 0:
@@ -512,6 +520,9 @@ def needle_design(
     refining ``stack`` again; ``method``: of the refinements (:func:`optimize_thicknesses`).
     Returns the final :class:`DesignResult` and a history (one dict per step: layers, merit,
     inserted needle).
+
+    Thicknesses in nm (``bounds_nm``: ``(lower, upper)``, scalars applied to every layer;
+    ``min_thickness_nm``); merits are dimensionless scalars.
     """
     def refine(st):
         return optimize_thicknesses(st, targets, bounds_nm=bounds_nm, maxiter=maxiter, method=method)
@@ -537,7 +548,11 @@ def needle_design(
 # ------------------------------------------------------------------ tolerances and yield
 class RobustSpec(NamedTuple):
     """Random thickness errors: Gaussian, ``sigma_nm`` absolute plus ``relative`` × thickness,
-    ``samples`` fixed draws (common random numbers: the robust merit stays smooth)."""
+    ``samples`` fixed draws (common random numbers: the robust merit stays smooth).
+
+    ``sigma_nm`` in nm, ``relative`` a dimensionless fraction; the draws are standard normals of
+    shape ``(samples, F)`` (F free layers), seeded by ``seed``; perturbed thicknesses are
+    clipped at 0."""
 
     sigma_nm: float = 0.0
     relative: float = 0.0
@@ -561,8 +576,9 @@ def _expected_merit(stack, targets, free, d, spec: RobustSpec):
 
 
 class YieldResult(NamedTuple):
-    """Monte-Carlo of thickness errors: ``fraction`` of draws within spec, per-draw ``merits``
-    and ``within`` flags ``(samples,)``."""
+    """Monte-Carlo of thickness errors: ``fraction`` of draws within spec (a dimensionless
+    scalar in [0, 1]), per-draw ``merits`` (dimensionless) and ``within`` flags, each of shape
+    ``(samples,)``."""
 
     fraction: float
     merits: np.ndarray
@@ -577,7 +593,11 @@ def thickness_yield(
     free: Optional[Sequence[int]] = None,
 ) -> YieldResult:
     """Fraction of manufactured designs within spec (every target point within its tolerance)
-    when the thicknesses of layers ``free`` carry random errors ``errors`` (one vmapped call)."""
+    when the thicknesses of layers ``free`` carry random errors ``errors`` (one vmapped call).
+
+    ``errors``: a :class:`RobustSpec` (``sigma_nm`` in nm). Returns a :class:`YieldResult`: the
+    fraction is a dimensionless scalar in [0, 1]; ``merits`` and ``within`` have shape
+    ``(samples,)``."""
     free = _free_layers(stack, free)
     d = jnp.asarray([float(np.asarray(stack.layers[i].thickness)) for i in free])
     z = jnp.asarray(_perturbations(errors, len(free)))

@@ -70,6 +70,9 @@ def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
 def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarray:
     """Linear interpolation of ``values`` (``(..., n)`` on ``wavelength_nm``) onto ``grid_nm``.
 
+    ``wavelength_nm``: ``(n,)`` and ``grid_nm``: ``(wl,)``, both in nm; returns ``(..., wl)``
+    in the unit of ``values``.
+
     Raises :class:`LayerstackError` when the grid reaches outside the data's range (no
     extrapolation) or the data wavelengths do not increase strictly.
     """

@@ -132,7 +132,8 @@ def _layer_path(layer: LayerRef, *rest) -> tuple:
 
 def thickness(layer: LayerRef, *, value=None, lower=None, upper=None, per_sample=False, name="", scale=None,
               fixed=None) -> Parameter:
-    """Thickness (nm, default bounds [0, ∞)) of a layer given by position or name."""
+    """Thickness (nm, default bounds [0, ∞)) of a layer given by position or name: a scalar, or
+    ``(samples,)`` with ``per_sample=True``."""
     return Parameter(_layer_path(layer, "thickness"), "thickness", name or f"thickness[{layer}]", value, lower, upper,
                      None, per_sample, 0.0, scale, fixed)
 
@@ -147,14 +148,19 @@ def alpha(layer: LayerRef, *, basis=None, value=None, lower=None, upper=None, pe
 
 def rho_g(*, basis=None, value=None, lower=None, upper=None, per_sample=False, smoothness=0.0, name="rho_g",
           scale=None) -> Parameter:
-    """Intrinsic reflectance ρg of the Lambertian background (default bounds [0, 1])."""
+    """Intrinsic reflectance ρg of the Lambertian background, a dimensionless fraction (default
+    bounds [0, 1]): a scalar (``basis=None``), per wavelength (``"free"``, shape ``(wl,)``) or
+    on a basis (int m or ``(wl, m)`` matrix: m coefficients); ``per_sample`` adds a leading
+    ``(samples,)`` axis."""
     return Parameter(("exit", "reflectance"), "rho_g", name, value, lower, upper, basis, per_sample, smoothness, scale)
 
 
 def index_n(medium: LayerRef, *, basis=None, value=None, lower=None, upper=None, per_sample=False, smoothness=0.0,
             name="", scale=None) -> Parameter:
-    """Real index n (default bounds [1, ∞)) of a medium whose material is an :class:`~layerstack_jax.Index`:
-    a layer (position or name), ``"ambient"`` or ``"exit"``."""
+    """Real index n (dimensionless, default bounds [1, ∞)) of a medium whose material is an
+    :class:`~layerstack_jax.Index`: a layer (position or name), ``"ambient"`` or ``"exit"``. A
+    scalar (``basis=None``), per wavelength (``"free"``, shape ``(wl,)``) or on a basis (int m or
+    ``(wl, m)`` matrix); ``per_sample`` adds a leading ``(samples,)`` axis."""
     return Parameter(_layer_path(medium, "index", "n"), "n", name or f"n[{medium}]", value, lower, upper, basis,
                      per_sample, smoothness, scale)
 
@@ -162,7 +168,11 @@ def index_n(medium: LayerRef, *, basis=None, value=None, lower=None, upper=None,
 def dispersion(medium: LayerRef, coefficient: str, *, value=None, lower=None, upper=None, per_sample=False, name="",
                scale=None) -> Parameter:
     """A coefficient of a :class:`~layerstack_jax.Cauchy` (``A``, ``B``, ``C``, ``k``) or
-    :class:`~layerstack_jax.Sellmeier` (``B``, ``C`` — vectors —, ``k``) dispersion (λ in µm)."""
+    :class:`~layerstack_jax.Sellmeier` (``B``, ``C`` — vectors —, ``k``) dispersion (λ in µm).
+
+    Units are the material's: Cauchy A and k dimensionless, B in µm², C in µm⁴; Sellmeier B
+    dimensionless, C in µm². The value is a scalar, or ``(term,)`` for Sellmeier B and C;
+    ``per_sample`` adds a leading ``(samples,)`` axis."""
     kind = "n" if coefficient == "A" else "coefficient"
     lo = lower if lower is not None else (0.0 if coefficient == "k" else None)
     return Parameter(_layer_path(medium, "index", coefficient), kind, name or f"{coefficient}[{medium}]", value, lo,

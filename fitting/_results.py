@@ -95,6 +95,10 @@ class FitResult:
         num_steps, converged, reason, result_code: solver outcome.
         singular_values, rank: of the normalised Jacobian; ``non_identifiable``: list of
             ``{"parameters", "direction", "combination"}``.
+
+    Values and errors are in each parameter's own unit (nm for thicknesses, 1/nm for α,
+    dimensionless for n and ρg); ``model``, ``data`` and ``residuals`` in the unit the
+    dataset's geometry reads (dimensionless reflectance, 1/sr for BRDF, degrees for ψ/Δ).
     """
 
     objective: Objective

@@ -291,6 +291,8 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             mark a non-identifiable combination.
 
     Never raises on non-convergence: see ``result.converged`` and ``result.reason``.
+    ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
+    for α, dimensionless for n and ρg).
     """
     from ._results import build_result
 

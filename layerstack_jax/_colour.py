@@ -79,7 +79,7 @@ __all__ = [
     "srgb_encode",
 ]
 
-#: The visible range the data grid must cover (CIE 15:2004 §7.2), nm.
+#: The visible range the data grid must cover (CIE 15:2004 §7.2): two scalars ``(min, max)`` in nm.
 VISIBLE_RANGE_NM = (380.0, 780.0)
 
 #: Observer names accepted by :class:`ColourSpace` → colour-science's table name.
@@ -289,7 +289,11 @@ def _safe_atan2(y, x):
 
 def xyz_to_xyy(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Optional[ArrayLike] = None) -> Float[Array, "*batch 3"]:
     """x = X/(X+Y+Z), y = Y/(X+Y+Z), Y. For black (X+Y+Z = 0) x, y are those of ``white_XYZ``
-    (colour-science's convention), or 0 if no white is given."""
+    (colour-science's convention), or 0 if no white is given.
+
+    ``XYZ``: ``(*batch, 3)`` on any scale; ``white_XYZ``: ``(3,)`` or None. Returns (x, y, Y)
+    ``(*batch, 3)``: x, y dimensionless chromaticities, Y on the scale of the input.
+    """
     XYZ = jnp.asarray(XYZ)
     s = jnp.sum(XYZ, axis=-1, keepdims=True)
     black = s == 0
@@ -308,7 +312,12 @@ def _lab_f(t):
 
 def xyz_to_lab(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Float[ArrayLike, "3"]) -> Float[Array, "*batch 3"]:
     """CIELAB (CIE 15:2004 eqs. 8.3–8.5): L* = 116 f(Y/Yn) − 16, a* = 500 [f(X/Xn) − f(Y/Yn)],
-    b* = 200 [f(Y/Yn) − f(Z/Zn)]; XYZ and the white on the same scale."""
+    b* = 200 [f(Y/Yn) − f(Z/Zn)]; XYZ and the white on the same scale (Y = 100 or Y = 1 for
+    the white: only the ratios enter).
+
+    ``XYZ``: ``(*batch, 3)``; ``white_XYZ``: ``(3,)``. Returns (L*, a*, b*) ``(*batch, 3)``,
+    dimensionless (L* = 100 for the white).
+    """
     f = _lab_f(jnp.asarray(XYZ) / jnp.asarray(white_XYZ))
     L = 116.0 * f[..., 1] - 16.0
     a = 500.0 * (f[..., 0] - f[..., 1])
@@ -318,14 +327,23 @@ def xyz_to_lab(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Float[ArrayLike, "3
 
 def srgb_encode(rgb_linear):
     """sRGB transfer function (IEC 61966-2-1): 12.92 L for L <= 0.0031308, else
-    1.055 L^(1/2.4) − 0.055 (negative values stay on the linear segment)."""
+    1.055 L^(1/2.4) − 0.055 (negative values stay on the linear segment).
+
+    ``rgb_linear``: linear sRGB, any shape (e.g. ``(*batch, 3)``), on the scale where white
+    is 1 (dimensionless; values outside [0, 1] are not clipped). Returns the encoded values,
+    same shape, same scale.
+    """
     L = jnp.asarray(rgb_linear)
     power = 1.055 * jnp.power(jnp.maximum(L, _SRGB_BREAK), 1.0 / 2.4) - 0.055
     return jnp.where(L <= _SRGB_BREAK, 12.92 * L, power)
 
 
 def delta_e_ab(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch"]:
-    """CIE 1976 ΔE*ab: the Euclidean distance in CIELAB (zero gradient at ΔE = 0)."""
+    """CIE 1976 ΔE*ab: the Euclidean distance in CIELAB (zero gradient at ΔE = 0).
+
+    ``lab1``, ``lab2``: CIELAB ``(*batch, 3)`` (broadcast against each other); returns
+    ``(*batch)`` in CIELAB units (dimensionless).
+    """
     d = jnp.asarray(lab1) - jnp.asarray(lab2)
     return _safe_sqrt(jnp.sum(d * d, axis=-1))
 
@@ -337,6 +355,9 @@ def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*ba
     Hue angles in degrees in [0, 360); h' = 0 for a'=b=0 (eq. 7); Δh' = 0 and h̄' = h'1 + h'2
     when C'1 C'2 = 0 (eqs. 10, 14). Gradients are finite everywhere (neutral greys, identical
     colours), see the module notes.
+
+    ``lab1``, ``lab2``: CIELAB ``(*batch, 3)`` (L*, a*, b*, broadcast against each other);
+    returns ΔE00 shaped ``(*batch)``, in CIELAB units (dimensionless, ~1 = just noticeable).
     """
     lab1, lab2 = jnp.asarray(lab1), jnp.asarray(lab2)
     L1, a1, b1 = lab1[..., 0], lab1[..., 1], lab1[..., 2]

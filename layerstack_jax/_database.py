@@ -232,6 +232,9 @@ class DatabaseFormula(Material):
         range_nm: ``(min, max)`` validity range in nm (static): outside it, an error.
         k_wavelength_nm, k: optional extinction table (nm; k ≥ 0).
         name: for messages, e.g. ``"SiO2 (Malitson 1965: n 0.21–6.7 µm)"``.
+
+    Called with wavelengths in nm of shape ``(wl,)`` it returns the complex index n + ik
+    (dimensionless), shape ``(wl,)``.
     """
 
     kind: int = eqx.field(static=True)
@@ -351,7 +354,8 @@ def material(book: str, source: Optional[str] = None, *, shelf: Optional[str] = 
 
     Returns:
         :class:`~layerstack_jax.Tabulated` for tabulated data, :class:`DatabaseFormula` for a
-        dispersion formula. Wavelengths outside the data range raise :class:`LayerstackError`.
+        dispersion formula. Called with wavelengths in nm ``(wl,)`` it returns the complex index
+    ``(wl,)``; wavelengths outside the data range raise :class:`LayerstackError`.
 
     Raises:
         LayerstackError: unknown material (near matches listed), unknown or ambiguous source

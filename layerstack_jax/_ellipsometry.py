@@ -98,6 +98,10 @@ def psi_delta(r_s, r_p):
 
     :math:`\psi = \operatorname{atan2}(|r_p|, |r_s|)`, :math:`\Delta = \arg(r_p \bar r_s)`; both
     are NaN-free with finite gradients also at Brewster's angle (:math:`r_p = 0`).
+
+    ``r_s``, ``r_p``: complex amplitude coefficients (dimensionless), broadcast against each
+    other to ``(*B)`` (e.g. ``(*angle, wl)``). Returns ``(psi, delta)``, each ``(*B)``, in
+    radians: ψ in [0, π/2], Δ in (−π, π].
     """
     psi = _safe_atan2(_safe_abs(r_p), _safe_abs(r_s))
     c = r_p * jnp.conj(r_s)
@@ -178,6 +182,9 @@ class Ellipsometric(Geometry):
     ``quantity``: ``'psi'`` or ``'delta'`` (degrees, conventions of :func:`ellipsometry`), or the
     wrap-free ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (better fitting
     targets: Δ jumps at ±180°).
+
+    ``angle_deg``: scalar or array ``(*angle)`` of incidence angles in degrees; :meth:`measure`
+    returns ``(*angle, wl)`` (ψ, Δ in degrees; N, C, S dimensionless).
     """
 
     angle_deg: object = 70.0

@@ -52,11 +52,13 @@ def normal_wavevector(n, s):
     r"""Normal wavevector ratio :math:`q = \tilde n \cos\theta = \sqrt{\tilde n^2 - s^2}`.
 
     Args:
-        n: complex index of the medium, any shape.
-        s: Snell invariant :math:`n_0 \sin\theta_0` (real), broadcastable against ``n``.
+        n: complex index of the medium (dimensionless), any shape.
+        s: Snell invariant :math:`n_0 \sin\theta_0` (real, dimensionless; θ0 in radians inside
+            the sine), broadcastable against ``n``.
 
     Returns:
-        Complex array with :math:`\operatorname{Im} q \ge 0` (forward, decaying wave; purely
+        Complex, dimensionless array of the broadcast shape of ``n`` and ``s``, with
+        :math:`\operatorname{Im} q \ge 0` (forward, decaying wave; purely
         imaginary past the critical angle of a lossless medium).
     """
     n = jnp.asarray(n)
@@ -75,8 +77,14 @@ def fresnel_amplitudes(n_i, q_i, n_f, q_f):
     (the intensity forms are Simonot et al. eqs. 2–3; the amplitudes are the r_j, t_j of
     Hirayama et al. eqs. 1–4).
 
+    Args:
+        n_i, n_f: complex indices of the two media (dimensionless).
+        q_i, q_f: their normal wavevector ratios :math:`\tilde n\cos\theta` (dimensionless,
+            from :func:`normal_wavevector`). All four broadcast to a common shape ``(*B)``.
+
     Returns:
-        ``(r, t)``, each stacked on a new leading polarization axis ``(s, p)``.
+        ``(r, t)``: complex, dimensionless amplitude ratios, each shaped ``(2, *B)``: stacked
+        on a new leading polarization axis ``(s, p)``.
     """
     a = n_f * n_f * q_i
     b = n_i * n_i * q_f

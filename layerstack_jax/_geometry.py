@@ -44,8 +44,10 @@ __all__ = [
 class Response(NamedTuple):
     """Angle-resolved response. Arrays shaped ``(*angle, 2, wl)``: axis −2 is polarization
     ``(s, p)``. ``*_front``: light from the ambient; ``*_back``: from the exit medium at the same
-    Snell invariant. ``T``: power entering the far medium. Use :meth:`natural` for unpolarized
-    light (mean of s and p, taken after the whole recursion: Simonot eqs. 57–58)."""
+    Snell invariant. ``T``: power entering the far medium. All are dimensionless fractions of
+    the incident power, in [0, 1]; ``R_back`` and ``T_back`` are None when ``both_sides=False``.
+    Use :meth:`natural` for unpolarized light (mean of s and p, taken after the whole recursion:
+    Simonot eqs. 57–58): it returns a :class:`Response` with arrays ``(*angle, wl)``."""
 
     R_front: object
     T_front: object
@@ -62,7 +64,7 @@ class Response(NamedTuple):
 
 class Diffuse(NamedTuple):
     """Hemispherical reflectance ``r`` and transmittance ``t`` for Lambertian natural light,
-    shaped ``(wl,)`` (Simonot eqs. 47, 49, 62, 63)."""
+    shaped ``(wl,)``, dimensionless fractions in [0, 1] (Simonot eqs. 47, 49, 62, 63)."""
 
     r: object
     t: object
@@ -141,7 +143,11 @@ class Geometry(eqx.Module):
 
 class Sphere(Geometry):
     """Integrating sphere, collimated illumination at ``incidence_deg``; specular component
-    ``'excluded'`` (SCE, Simonot eq. 78) or ``'included'`` (SCI: adds the front reflectance)."""
+    ``'excluded'`` (SCE, Simonot eq. 78) or ``'included'`` (SCI: adds the front reflectance).
+
+    ``incidence_deg`` in degrees from the normal: a scalar, or an array ``(*angle)`` that adds
+    leading axes to the :func:`reflectance` output ``(*angle, wl)``.
+    """
 
     incidence_deg: object = 8.0
     specular: str = eqx.field(static=True, default="excluded")
@@ -153,7 +159,12 @@ class Sphere(Geometry):
 
 class Directional(Geometry):
     """Radiance detector: reflectance factor against a perfect white diffuser (Simonot eq. 79),
-    illumination at ``incidence_deg``, viewing at ``viewing_deg`` (45/0, 0/45, …)."""
+    illumination at ``incidence_deg``, viewing at ``viewing_deg`` (45/0, 0/45, …).
+
+    Angles in degrees from the normal, scalars or arrays broadcastable to a common ``(*angle)``
+    that adds leading axes to the :func:`reflectance` output ``(*angle, wl)``; the value is a
+    dimensionless reflectance factor.
+    """
 
     incidence_deg: object = 45.0
     viewing_deg: object = 0.0
@@ -161,7 +172,11 @@ class Directional(Geometry):
 
 class BRDF(Geometry):
     """Bidirectional reflectance distribution function in 1/sr (Simonot eq. 76): the
-    :class:`Directional` reflectance factor divided by π (diffuse part only)."""
+    :class:`Directional` reflectance factor divided by π (diffuse part only).
+
+    Angles in degrees from the normal, scalars or arrays broadcastable to a common ``(*angle)``
+    that adds leading axes to the :func:`reflectance` output ``(*angle, wl)``.
+    """
 
     incidence_deg: object = 45.0
     viewing_deg: object = 0.0
@@ -169,7 +184,11 @@ class BRDF(Geometry):
 
 class Specular(Geometry):
     """Specular measurement at ``angle_deg``: ``quantity`` 'R' (reflectance), 'T' (transmittance
-    into the exit medium) or 'A' (absorptance, 1 − R − T)."""
+    into the exit medium) or 'A' (absorptance, 1 − R − T), for natural light.
+
+    ``angle_deg`` in degrees from the normal: a scalar, or an array ``(*angle)`` that adds
+    leading axes to the :func:`reflectance` output ``(*angle, wl)`` (dimensionless fractions).
+    """
 
     angle_deg: object = 0.0
     quantity: str = eqx.field(static=True, default="R")
@@ -236,6 +255,10 @@ class Optics(eqx.Module):
     ``diffuse`` at the back-side hemispherical nodes (over a background) with their ``weights``;
     ``index`` and ``films``: the indices and coherent-film thicknesses they were made with
     (checked against the stack when both are concrete).
+
+    Everything is on the wavelength grid ``(wl,)`` (nm) it was made for: the Fresnel arrays
+    carry the geometry's angle axes ``(*angle)`` and, for ``diffuse``, a node axis; the values
+    are dimensionless (amplitude and intensity ratios; μ = sin²θ nodes and weights).
     """
 
     geometry: Geometry
@@ -278,6 +301,7 @@ def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int 
 
     Valid for any stack with the same structure, indices and coherent-film thicknesses: only
     thick-layer thicknesses, α and ρg may differ when it is passed to :func:`reflectance`.
+    The grid ``wavelength_nm`` ``(wl,)`` must be the one later passed to :func:`reflectance`.
     """
     rs = resolve(stack, wavelength_nm)
     return _optics_resolved(rs, isinstance(stack.exit, LambertianBackground), geometry, nodes)
@@ -366,6 +390,18 @@ def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry,
     :math:`\rho_g = R/(A + r_b R)`. For a bare background pass ``Stack(ambient, [],
     LambertianBackground(n_g, 0.0))``; the stack's own ρg is ignored. For SCI the specular
     reflectance is subtracted first.
+
+    Args:
+        stack: a stack over a :class:`LambertianBackground`.
+        wavelength_nm: ``(wl,)`` vacuum wavelengths in nm.
+        measured: the instrument reading, broadcastable to ``(*angle, wl)``: a dimensionless
+            reflectance (factor) for :class:`Sphere` / :class:`Directional`, in 1/sr for
+            :class:`BRDF`.
+        geometry: a :class:`Sphere`, :class:`Directional` or :class:`BRDF` (angles in degrees).
+        nodes: Gauss–Legendre nodes per critical-angle segment.
+
+    Returns:
+        ρg, dimensionless, shaped like ``measured`` broadcast against ``(*angle, wl)``.
     """
     if not isinstance(stack.exit, LambertianBackground):
         raise LayerstackError("invert_background needs a stack over a LambertianBackground")

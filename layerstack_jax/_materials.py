@@ -58,7 +58,15 @@ class Index(Material):
 
 class Cauchy(Material):
     r"""Cauchy dispersion :math:`n = A + B/\lambda^2 + C/\lambda^4` (λ in µm; B in µm², C in µm⁴),
-    with a constant extinction coefficient k."""
+    with a constant extinction coefficient k.
+
+    Attributes:
+        A: dimensionless; B in µm²; C in µm⁴; k dimensionless (>= 0). Each a scalar or an array
+            broadcastable against the wavelength grid ``(wl,)`` (e.g. ``(*batch, 1)``).
+
+    Called with wavelengths in nm of shape ``(wl,)`` it returns the complex index n + ik,
+    shape ``(wl,)`` (broadcast with the coefficients' shapes).
+    """
 
     A: object
     B: object = 0.0
@@ -75,7 +83,16 @@ class Cauchy(Material):
 
 class Sellmeier(Material):
     r"""Sellmeier dispersion :math:`n^2 = 1 + \sum_i B_i \lambda^2 / (\lambda^2 - C_i)`
-    (λ in µm, :math:`C_i` in µm²), with a constant extinction coefficient k."""
+    (λ in µm, :math:`C_i` in µm²), with a constant extinction coefficient k.
+
+    Attributes:
+        B: dimensionless oscillator strengths, shape ``(term,)`` (or a scalar: one term).
+        C: resonance terms in µm², same shape as ``B``.
+        k: extinction coefficient (>= 0, dimensionless), scalar or broadcastable to ``(wl,)``.
+
+    Called with wavelengths in nm of shape ``(wl,)`` it returns the complex index n + ik,
+    shape ``(wl,)``.
+    """
 
     B: object
     C: object
@@ -101,8 +118,12 @@ class Tabulated(Material):
     never silently extrapolated.
 
     Attributes:
-        wavelength_nm: increasing table wavelengths, nm (static, not fitted).
-        n, k: table values, same length.
+        wavelength_nm: increasing table wavelengths, nm, shape ``(table,)`` (static, not fitted).
+        n, k: table values (dimensionless), shape ``(table,)`` each; ``k=None`` means 0.
+        name: label used in messages.
+
+    Called with wavelengths in nm of shape ``(wl,)`` it returns the complex index n + ik,
+    shape ``(wl,)``.
     """
 
     wavelength_nm: np.ndarray = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))

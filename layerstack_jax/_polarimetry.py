@@ -98,8 +98,9 @@ _STATES = {
 
 
 def stokes(state: str):
-    """Unit-intensity Stokes vector ``(4, 1)`` (broadcasts over wavelength) of a named state:
-    'unpolarized', 's', 'p', '+45', '-45', 'R' (V = +1), 'L' (V = −1)."""
+    """Unit-intensity Stokes vector of shape ``(4, 1)`` (broadcasts over wavelength) of a named
+    state: 'unpolarized', 's', 'p', '+45', '-45', 'R' (V = +1), 'L' (V = −1). The components are
+    dimensionless (I = 1); multiply by an intensity for other scales."""
     try:
         return jnp.asarray(_STATES[state])[:, None]
     except KeyError:
@@ -293,7 +294,8 @@ def specular_mueller(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Float[
 def mueller_from_jones(J):
     r"""Mueller matrix :math:`M_{kl} = \tfrac12\operatorname{tr}(J^\dagger\sigma_k J\sigma_l)` of a
     Jones matrix ``J`` shaped ``(*batch, 2, 2)`` in the ``(p, s)`` basis; returns
-    ``(*batch, 4, 4)`` (here the matrix axes are last: a helper for single matrices)."""
+    ``(*batch, 4, 4)`` (here the matrix axes are last: a helper for single matrices). J and M
+    are dimensionless (amplitude and intensity transfer ratios)."""
     J = jnp.asarray(J)
     sig = jnp.asarray(PAULI)
     Jh = jnp.conj(jnp.swapaxes(J, -1, -2))
@@ -302,13 +304,18 @@ def mueller_from_jones(J):
 
 
 def apply_mueller(M, S):
-    """Mueller matrix ``(*batch, 4, 4, wl)`` times Stokes vector ``(*batch, 4, wl)`` (broadcast)."""
+    """Mueller matrix ``(*batch, 4, 4, wl)`` times Stokes vector ``(*batch, 4, wl)`` (broadcast).
+
+    M is dimensionless (outgoing over incident intensity); the result ``(*batch, 4, wl)`` is
+    in the unit of ``S``.
+    """
     return jnp.sum(jnp.asarray(M) * jnp.asarray(S)[..., None, :, :], axis=-2)
 
 
 def degree_of_polarization(S):
     r"""Degree of polarization :math:`\sqrt{Q^2+U^2+V^2}/I` of Stokes vectors ``(*batch, 4, wl)``;
-    returns ``(*batch, wl)`` (0 where I = 0, with a finite gradient)."""
+    returns ``(*batch, wl)``, a dimensionless fraction in [0, 1] for physical Stokes vectors
+    (0 where I = 0, with a finite gradient)."""
     S = jnp.asarray(S)
     I = S[..., 0, :]
     p2 = jnp.sum(S[..., 1:, :] ** 2, axis=-2)
@@ -321,7 +328,8 @@ def coherency_matrix(M):
     r"""Cloude coherency matrix :math:`H = \tfrac14\sum_{kl} m_{kl}\,\sigma_k\otimes\bar\sigma_l`
     (Cloude 1986) of a Mueller matrix ``(*batch, 4, 4, wl)``; returns ``(*batch, wl, 4, 4)``
     Hermitian with :math:`\operatorname{tr} H = m_{00}`. For a pure (Jones) Mueller matrix H is
-    rank one; M is a convex sum of Jones systems (physically realizable) iff H ⪰ 0."""
+    rank one; M is a convex sum of Jones systems (physically realizable) iff H ⪰ 0.
+    The elements are dimensionless, like M."""
     sig = jnp.asarray(PAULI)
     basis = jnp.einsum("kab,lcd->klacbd", sig, jnp.conj(sig)).reshape(4, 4, 4, 4)
     return 0.25 * jnp.einsum("...klw,klij->...wij", jnp.asarray(M), basis)
@@ -329,14 +337,16 @@ def coherency_matrix(M):
 
 def cloude_eigenvalues(M):
     """Eigenvalues (ascending) of the Cloude coherency matrix of ``M`` ``(*batch, 4, 4, wl)``;
-    returns ``(*batch, 4, wl)``. All ≥ 0 for a physically realizable Mueller matrix."""
+    returns ``(*batch, 4, wl)``, dimensionless (they sum to :math:`m_{00}`). All ≥ 0 for a
+    physically realizable Mueller matrix."""
     lam = jnp.linalg.eigvalsh(coherency_matrix(M))
     return jnp.moveaxis(lam, -1, -2)
 
 
 def is_physical(M, tol: float = 1e-10):
     r"""True where ``M`` ``(*batch, 4, 4, wl)`` is physically realizable: every Cloude eigenvalue
-    :math:`\ge -\text{tol}\cdot m_{00}`. Returns a boolean array ``(*batch, wl)``."""
+    :math:`\ge -\text{tol}\cdot m_{00}`. Returns a boolean array ``(*batch, wl)``. ``tol`` is
+    dimensionless (relative to :math:`m_{00}`)."""
     lam = cloude_eigenvalues(M)
     m00 = jnp.asarray(M)[..., 0, 0, :]
     return jnp.all(lam >= -tol * jnp.abs(m00)[..., None, :], axis=-2)

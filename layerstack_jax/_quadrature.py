@@ -102,7 +102,9 @@ def hemispherical_rule(n_from, n_thick, nodes: int = DEFAULT_NODES):
         nodes: Gauss–Legendre nodes per segment.
 
     Returns:
-        ``(mu, w)`` shaped ``(node, *B)`` with ``node = nodes * (len(n_thick) + 1)``.
+        ``(mu, w)`` shaped ``(node, *B)`` with ``node = nodes * (len(n_thick) + 1)``; both
+        dimensionless (μ in [0, 1]; the weights sum to 1, so the Lambertian mean of f is
+        ``sum(w * f(mu), axis=0)``).
     """
     x, w = unit_rule(nodes)
     if is_concrete((n_from, *n_thick)):

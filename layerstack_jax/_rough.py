@@ -81,6 +81,10 @@ def microfacet_distribution(cos_h, alpha, distribution: str = "ggx"):
 
     GGX: :math:`\alpha^2/(\pi\cos^4\theta_h(\alpha^2 + \tan^2\theta_h)^2)`;
     Beckmann: :math:`\exp(-\tan^2\theta_h/\alpha^2)/(\pi\alpha^2\cos^4\theta_h)`.
+
+    ``cos_h``: cosine of the half-vector's polar angle (dimensionless); ``alpha``: roughness
+    (dimensionless slope parameter); broadcast against each other to ``(*B)``. Returns D in
+    1/sr, shape ``(*B)``. ``distribution``: ``'ggx'`` or ``'beckmann'``.
     """
     t2 = _tan2(cos_h)
     c4 = jnp.clip(cos_h, 1e-150, 1.0) ** 4
@@ -97,6 +101,9 @@ def smith_lambda(cos_v, alpha, distribution: str = "ggx"):
 
     GGX: :math:`(-1 + \sqrt{1 + \alpha^2\tan^2\theta})/2`; Beckmann, with
     :math:`a = 1/(\alpha\tan\theta)`: :math:`(\operatorname{erf}(a) - 1)/2 + e^{-a^2}/(2a\sqrt\pi)`.
+
+    ``cos_v`` and ``alpha`` (both dimensionless) broadcast against each other to ``(*B)``;
+    returns Λ ≥ 0, dimensionless, shape ``(*B)`` (0 at normal incidence).
     """
     t2 = _tan2(cos_v)
     if distribution == "ggx":

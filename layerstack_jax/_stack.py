@@ -64,7 +64,12 @@ class Layer(eqx.Module):
 
 
 class Substrate(eqx.Module):
-    """Specular semi-infinite exit medium (glass, silicon, a bulk metal …)."""
+    """Specular semi-infinite exit medium (glass, silicon, a bulk metal …).
+
+    Attributes:
+        index: material or number (n, or complex n + ik, dimensionless); a scalar or an array
+            broadcastable to ``(*batch, wl)``. Absorbing (k > 0) is allowed here.
+    """
 
     index: Material = eqx.field(converter=as_material)
 
@@ -121,6 +126,14 @@ class TabulatedSpectrum(eqx.Module):
     """A real spectrum (e.g. ρg) tabulated on its own wavelengths, linearly interpolated.
 
     Never extrapolates: asking outside the table raises :class:`LayerstackError`.
+
+    Attributes:
+        wavelength_nm: strictly increasing table wavelengths in nm, shape ``(table,)`` (static).
+        values: the spectrum at those wavelengths, shape ``(table,)``, in the spectrum's own
+            unit (a dimensionless fraction for ρg).
+        name: label used in messages.
+
+    Called with wavelengths in nm of shape ``(wl,)`` it returns a real array ``(wl,)``.
     """
 
     wavelength_nm: tuple = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))

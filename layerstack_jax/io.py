@@ -340,7 +340,8 @@ def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()
 def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Read measured spectra: a header row ``wavelength_nm, name1, name2, …`` then numbers.
 
-    Returns ``(wavelength_nm, {name: values})``. Lines starting with ``#`` (e.g. a note that the
+    Returns ``(wavelength_nm, {name: values})``: wavelengths in nm and each spectrum as it is in
+    the file (no unit conversion), all 1-D arrays of shape ``(wl,)``. Lines starting with ``#`` (e.g. a note that the
     data are synthetic) and blank lines are skipped. Raises :class:`LayerstackError` naming the
     file and line for a missing ``wavelength_nm`` column, no spectrum column, a duplicate name,
     a short or non-numeric row, NaN, or wavelengths that do not increase strictly.
@@ -611,6 +612,11 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
         free: if a list, the free-parameter declarations found are appended to it (dicts with
             ``path``, ``kind``, ``name``, ``lower``, ``upper``, ``basis``, ``per_sample``,
             ``smoothness``); layers are named in the paths.
+
+    Units are those of the file: ``thickness_nm`` in nm, ``alpha_per_nm`` in 1/nm, ``rho_g`` a
+    fraction in [0, 1]. Numbers stay scalars; tables become :class:`Tabulated` /
+    :class:`TabulatedSpectrum` leaves of shape ``(table,)``, so the stack can be evaluated on
+    any grid ``(wl,)`` inside the tables' range.
     """
     base_dir = Path(base_dir)
     top = _Where(source, "top level")
@@ -690,7 +696,9 @@ def load_fit_stack(path) -> tuple[Stack, list]:
     """Read a stack file and its free-parameter declarations (module docstring, "Free
     parameters"): returns ``(stack, declarations)``, each declaration a dict with ``path``
     (layers by name), ``kind``, ``name``, ``lower``, ``upper`` (None: default), ``basis``,
-    ``per_sample``, ``smoothness``."""
+    ``per_sample``, ``smoothness``. Bounds are in the parameter's file unit (nm for
+    ``thickness_nm``, 1/nm for ``alpha_per_nm``, a fraction in [0, 1] for ``rho_g``); the stack is
+    as from :func:`load_stack` (scalars, or tables of shape ``(table,)``)."""
     path = Path(path)
     free: list = []
     stack = stack_from_dict(_read_toml(path), path.parent, source=str(path), free=free)
@@ -700,7 +708,8 @@ def load_fit_stack(path) -> tuple[Stack, list]:
 def load_stack(path) -> Stack:
     """Read a stack file (TOML, schema in the module docstring). Relative table file names are
     resolved against the file's directory. Raises :class:`LayerstackError` naming the file and
-    the offending table/key for any problem."""
+    the offending table/key for any problem. Units and shapes as in :func:`stack_from_dict`
+    (thicknesses in nm, α in 1/nm; tables become leaves of shape ``(table,)``)."""
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -862,6 +871,11 @@ def save_stack(path, stack, *, header: str = "") -> Path:
             relative table file names must then be valid from the output's directory).
         header: free text written first as ``#`` comment lines.
     Returns the path written.
+
+    Units as in the stack-file schema (``thickness_nm`` in nm, ``alpha_per_nm`` in 1/nm). A
+    :class:`Stack`'s leaves must be scalars or tables with their own wavelengths
+    (:class:`Tabulated`, :class:`TabulatedSpectrum`, shape ``(table,)``): arrays sampled on a
+    model grid or traced values raise :class:`LayerstackError` (see :func:`stack_to_dict`).
     """
     d = stack_to_dict(stack) if isinstance(stack, Stack) else stack
     if not isinstance(d, Mapping):
@@ -910,6 +924,7 @@ def save_spectra_csv(path, wavelength_nm, columns: Mapping[str, object], *, fmt:
 def parse_wavelengths(text) -> np.ndarray:
     """Wavelength grid in nm from ``"start:stop:step"`` (stop included when it falls on the
     grid), a single value ``"550"`` or a comma list ``"450,550,650"`` (strictly increasing).
+    Returns a 1-D float array of shape ``(wl,)`` in nm.
     """
     t = str(text).strip()
     bad = LayerstackError(

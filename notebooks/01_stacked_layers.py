@@ -299,7 +299,7 @@ ax2 = ax.twinx()
 ax2.plot(wl, np.exp(-alpha_aged * 30_000.0), ":", color="gray")
 ax2.set_ylabel("single-pass normal transmittance of the aged varnish (dotted)", color="gray", fontsize=8)
 ax.legend(loc="center right", fontsize=8)
-save(fig, "02_varnished_painting")
+save(fig, "01_varnished_painting")
 
 # %% [markdown]
 # ## 3 · The Williams–Clapper photographic print (eqs. 80–82)
@@ -380,7 +380,7 @@ ax.plot(D_naive, D_naive, "--", color="gray", label="Beer along the two paths on
 ax.set(xlabel="naive density (dye only)", ylabel="print reflection density, 45°/0°",
        title="Internal reflections deepen a print (ρg = 0.9, n = 1.5)")
 ax.legend(fontsize=8)
-save(fig, "03_williams_clapper_density")
+save(fig, "01_williams_clapper_density")
 
 # %% [markdown]
 # ## 4 · Shore–Spoonhower (eq. 83) and Saunderson as special cases
@@ -460,7 +460,7 @@ ax.plot(wl, R_ym, label="yellow n = 1.40 on magenta n = 1.65")
 ax.plot(wl, R_my, "--", label="magenta n = 1.65 on yellow n = 1.40")
 ax.set(xlabel="wavelength (nm)", ylabel="45°/0° reflectance factor", title="Two coloured layers on paper (n_g = 1.5)")
 ax.legend(fontsize=8)
-save(fig, "05_two_layers")
+save(fig, "01_two_layers")
 
 # %% [markdown]
 # ## 6 · How the reflectance depends on the index mismatch
@@ -498,7 +498,7 @@ for n_g in (1.4, 1.5, 1.6):
 axes[0].set_ylabel("reflectance (ρg = 0.5)")
 axes[0].legend(fontsize=8)
 fig.suptitle("A clear layer over paint: reflectance vs the layer's index (dots: n₁ = n_g, no interface)")
-save(fig, "06_index_mismatch")
+save(fig, "01_index_mismatch")
 R = mismatch[1.5, "45°/0°"]
 print(f"n_g = 1.5, 45°/0°: R = {R.min():.4f} … {R.max():.4f} for n₁ in [1.2, 2.0]; bare paint {R[np.argmin(np.abs(n1_sweep - 1.5))]:.4f}")
 
@@ -536,7 +536,7 @@ for k, p in enumerate(patches[:3]):
     ax.plot(wl, R_450[k], "--", color=line.get_color(), label=f"{p}: 45°/0°")
 ax.set(xlabel="wavelength (nm)", ylabel="reflectance", title="Varnished paints in three instruments", ylim=(0, 1.12))
 ax.legend(fontsize=7, ncol=3, loc="upper left")
-save(fig, "07_geometries")
+save(fig, "01_geometries")
 
 # %% [markdown]
 # ## 8 · ρg from a measurement over a varnished painting, and the round trip
@@ -567,5 +567,5 @@ for k, p in enumerate(patches[:3]):
     ax.plot(wl, naive[k], "--", color=line.get_color(), label=f"{p}: eq. 86 ignoring the varnish")
 ax.set(xlabel="wavelength (nm)", ylabel="intrinsic reflectance ρg", title="Inverting a varnished painting for ρg")
 ax.legend(fontsize=7)
-save(fig, "08_inversion")
+save(fig, "01_inversion")
 print("notebook 1: all checks passed")

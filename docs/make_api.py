@@ -1,10 +1,10 @@
-"""Generate docs/api.md from the docstrings of the public names of ``layerstack_jax``.
+"""Generate docs/api.md from the docstrings of the public names of ``layerstack_jax`` and ``fitting``.
 
     python docs/make_api.py            # writes docs/api.md, lists docstring gaps on stderr
     python docs/make_api.py --check    # exit 1 if docs/api.md is out of date
 
-The public names are those re-exported in ``layerstack_jax/__init__.py`` (``from ._x import Name
-as Name``), in that file's order. For each: its kind, signature, defining module and docstring;
+The public names are those re-exported in ``layerstack_jax/__init__.py`` and ``fitting/__init__.py``
+(``from ._x import Name as Name``), in that file's order. For each: its kind, signature, defining module and docstring;
 for classes also their public methods and properties. A docstring that names no unit or no shape
 is reported on stderr (a heuristic: it looks for unit and shape words), for authors to fix.
 """
@@ -20,6 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import fitting  # noqa: E402
 import layerstack_jax  # noqa: E402
 
 TARGET = ROOT / "docs" / "api.md"
@@ -35,6 +36,15 @@ GROUPS = [
     ("Files", ("load_stack", "stack_from_dict", "stack_to_dict", "read_csv_columns", "save_spectra_csv",
                "parse_wavelengths")),
     ("Errors", ("LayerstackError",)),
+]
+
+FITTING_GROUPS = [
+    ("Fitting: parameters", ("Parameter", "thickness", "alpha", "rho_g", "index_n", "dispersion", "bspline_basis")),
+    ("Fitting: data, objective, solvers", ("Dataset", "Objective", "resample", "fit", "METHODS", "FitResult",
+                                            "fit_batch", "BatchResult", "calibration_series", "background_rho_g")),
+    ("Design", ("SpectralTarget", "ColourTarget", "merit", "optimize_thicknesses", "DesignResult",
+                "with_thicknesses", "needle_function", "NeedleScan", "insert_needle", "needle_design",
+                "RobustSpec", "thickness_yield", "YieldResult")),
 ]
 
 
@@ -97,9 +107,9 @@ def doc_to_markdown(doc: str) -> str:
     return "\n".join(out).strip("\n")
 
 
-def public_names() -> list[str]:
+def public_names(package=layerstack_jax) -> list[str]:
     """Names re-exported in the package __init__, in order."""
-    tree = ast.parse((ROOT / "layerstack_jax" / "__init__.py").read_text(encoding="utf-8"))
+    tree = ast.parse((ROOT / package.__name__ / "__init__.py").read_text(encoding="utf-8"))
     names = []
     for node in tree.body:
         if isinstance(node, ast.ImportFrom):
@@ -140,15 +150,15 @@ def members(cls) -> list[tuple[str, object]]:
     return out
 
 
-def entry(name: str, gaps: list[str]) -> list[str]:
-    obj = getattr(layerstack_jax, name)
+def entry(name: str, gaps: list[str], package=layerstack_jax) -> list[str]:
+    obj = getattr(package, name)
     k = kind(obj)
-    module = getattr(obj, "__module__", None) or "layerstack_jax"
+    module = getattr(obj, "__module__", None) or package.__name__
     lines = [f"### `{name}`", ""]
     if k == "constant":
-        module = ".".join(_constant_source(name).relative_to(ROOT).with_suffix("").parts)
+        module = ".".join(_constant_source(name, package).relative_to(ROOT).with_suffix("").parts)
         lines += [f"*constant* `{name} = {obj!r}` — defined in `{module}`", ""]
-        doc = _constant_doc(name)
+        doc = _constant_doc(name, package)
     else:
         lines += [f"*{k}*, defined in `{module}`", "", "```python", f"{name}{signature(obj)}", "```", ""]
         doc = inspect.getdoc(obj) or ""
@@ -179,20 +189,20 @@ def entry(name: str, gaps: list[str]) -> list[str]:
 # tables and database look-ups that return only strings).
 _NO_UNITS_EXPECTED = {"LayerstackError", "Geometry", "Material", "parse_geometry", "read_csv_columns",
                       "stack_to_dict", "DEFAULT_NODES", "Stack", "OBSERVERS", "database_version",
-                      "material_sources"}
+                      "material_sources", "METHODS"}
 
 
-def _constant_source(name: str) -> Path:
+def _constant_source(name: str, package=layerstack_jax) -> Path:
     """The private module that defines the constant ``name`` (``NAME = …`` at top level)."""
-    for path in sorted((ROOT / "layerstack_jax").glob("*.py")):
+    for path in sorted((ROOT / package.__name__).glob("*.py")):
         if any(line.startswith(f"{name} =") or line.startswith(f"{name}:") for line in path.read_text(encoding="utf-8").splitlines()):
             return path
-    raise LookupError(f"no module of layerstack_jax defines {name}")
+    raise LookupError(f"no module of {package.__name__} defines {name}")
 
 
-def _constant_doc(name: str) -> str:
+def _constant_doc(name: str, package=layerstack_jax) -> str:
     """The ``#:`` comment block above a module-level constant."""
-    lines = _constant_source(name).read_text(encoding="utf-8").splitlines()
+    lines = _constant_source(name, package).read_text(encoding="utf-8").splitlines()
     for i, line in enumerate(lines):
         if line.startswith(f"{name} =") or line.startswith(f"{name}:"):
             doc = []
@@ -204,39 +214,48 @@ def _constant_doc(name: str) -> str:
     return ""
 
 
-def build() -> tuple[str, list[str]]:
-    names = public_names()
-    grouped = [n for _, g in GROUPS for n in g]
+def _package_groups(package, groups) -> list:
+    names = public_names(package)
+    grouped = [n for _, g in groups for n in g]
     missing = [n for n in names if n not in grouped]
-    groups = GROUPS + ([("Other", tuple(missing))] if missing else [])
+    return [(t, tuple(n for n in g if n in names)) for t, g in groups] + (
+        [(f"Other ({package.__name__})", tuple(missing))] if missing else [])
+
+
+def build() -> tuple[str, list[str]]:
+    sections = [(layerstack_jax, _package_groups(layerstack_jax, GROUPS)),
+                (fitting, _package_groups(fitting, FITTING_GROUPS))]
     gaps: list[str] = []
     out = [
         "<!-- Generated by docs/make_api.py from the docstrings: edit those, then run it. -->",
         "",
         "# API reference",
         "",
-        f"`layerstack_jax` {layerstack_jax.__version__}. Every public name, as re-exported in "
-        "`layerstack_jax/__init__.py`. Units: wavelengths and thicknesses in nm, α in 1/nm, angles in "
+        f"`layerstack_jax` {layerstack_jax.__version__} (the physics) and `fitting` (inverse problems and "
+        "design). Every public name, as re-exported in `layerstack_jax/__init__.py` and "
+        "`fitting/__init__.py`. Units: wavelengths and thicknesses in nm, α in 1/nm, angles in "
         "radians in functions and degrees in geometry objects; spectra are shaped `(..., wl)` with the "
         "wavelength last and polarization `(s, p)` on axis −2 of `specular` outputs. See "
         "[physics.md](physics.md) for the formulas.",
         "",
     ]
-    anchors: dict[str, str] = {}
+    anchors: dict[tuple, str] = {}
     seen: dict[str, int] = {}
-    for title, group in groups:
-        for n in group:
-            base = n.lower()
-            anchors[n] = base if base not in seen else f"{base}-{seen[base]}"
-            seen[base] = seen.get(base, 0) + 1
-    for title, group in groups:
-        out += [f"- **{title}**: " + ", ".join(f"[`{n}`](#{anchors[n]})" for n in group if n in names)]
+    for package, groups in sections:
+        for title, group in groups:
+            for n in group:
+                base = n.lower()
+                anchors[(package.__name__, n)] = base if base not in seen else f"{base}-{seen[base]}"
+                seen[base] = seen.get(base, 0) + 1
+    for package, groups in sections:
+        for title, group in groups:
+            out += [f"- **{title}**: " + ", ".join(f"[`{n}`](#{anchors[(package.__name__, n)]})" for n in group)]
     out += [""]
-    for title, group in groups:
-        out += [f"## {title}", ""]
-        for name in group:
-            if name in names:
-                out += entry(name, gaps)
+    for package, groups in sections:
+        for title, group in groups:
+            out += [f"## {title}", ""]
+            for name in group:
+                out += entry(name, gaps, package)
     return "\n".join(out).rstrip("\n") + "\n", gaps
 
 
@@ -249,7 +268,8 @@ def main(argv: list[str]) -> int:
             return 1
         return 0
     TARGET.write_text(text, encoding="utf-8")
-    print(f"wrote {TARGET.relative_to(ROOT)} ({len(public_names())} public names)", file=sys.stderr)
+    n = len(public_names(layerstack_jax)) + len(public_names(fitting))
+    print(f"wrote {TARGET.relative_to(ROOT)} ({n} public names)", file=sys.stderr)
     for gap in gaps:
         print(f"  docstring gap: {gap}", file=sys.stderr)
     return 0

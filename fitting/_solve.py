@@ -162,7 +162,11 @@ def dense_jacobian(fn):
     def g_jvp(primals, tangents):
         u, args = primals
         du, dargs = tangents
-        J, r = jax.jacfwd(lambda v: (fn(v, args), fn(v, args)), has_aux=True)(u)
+        def value_twice(v):  # the Jacobian's function and, as aux, its value: one pass
+            r = fn(v, args)
+            return r, r
+
+        J, r = jax.jacfwd(value_twice, has_aux=True)(u)
         out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ du
         if not all(isinstance(t, SymbolicZero) for t in jax.tree.leaves(
                 dargs, is_leaf=lambda t: isinstance(t, SymbolicZero))):

@@ -10,7 +10,9 @@ does not fail the batch.
 of the same varnish or ink at different thicknesses over the same background share α(λ) and
 ρg(λ) (each on a B-spline basis), each has its own thickness; ρg starts from — or is fixed
 to — the inversion of a bare-background measurement, :func:`layerstack_jax.invert_background`
-(Simonot et al. eqs. 86–87).
+(Simonot et al. eqs. 86–87). With ρg free, that bare-background spectrum is also fitted, as a
+dataset of its own (``Dataset(bare=True)``: the stack without its layers), so the joint fit
+sees both the coated samples and the uncoated background.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import linearised_covariance
-from ._solve import SolverOptions, compiled_fit, result_message, starting_point
+from ._solve import HOST_METHODS, SolverOptions, compiled_fit, result_message, starting_point
 
 __all__ = ["BatchResult", "fit_batch", "calibration_series", "background_rho_g"]
 
@@ -139,6 +141,11 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
 
     start_time = time.perf_counter()
     o = SolverOptions(method, rtol, atol, gtol, max_steps)
+    if method in HOST_METHODS:
+        raise LayerstackError(
+            f"fit_batch: method {method!r} runs on the host one fit at a time; batched fits need a compiled "
+            "solver: 'lm', 'gauss-newton', 'dogleg', 'bfgs' or 'lbfgsb'"
+        )
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     if objective.n_parameters == 0:
@@ -209,7 +216,8 @@ def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1
 
 def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry, *, layer=0, thicknesses=None,
                        alpha_basis=20, rho_g_basis: Optional[int] = 20, background=None, background_geometry=None,
-                       known=(0,), sigma=None, alpha_smoothness: float = 0.0) -> Objective:
+                       known=(0,), sigma=None, alpha_smoothness: float = 0.0, fit_background: bool = True,
+                       background_sigma=None) -> Objective:
     """Joint objective of a calibration series (see the module docstring).
 
     Args:
@@ -230,6 +238,11 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
             :func:`background_rho_g` becomes the start (or the fixed value) of ρg.
         background_geometry: geometry of that measurement (default: ``geometry``).
         sigma: σ of the spectra (scalar or ``(samples, wl)``), or None.
+        fit_background: when ρg is free and ``background`` is given, also fit the bare-background
+            spectrum (a :class:`~fitting.Dataset` with ``bare=True``): it pins ρg(λ) where the
+            coated samples are dark and ρg would otherwise trade off against α(λ).
+        background_sigma: σ of the background spectrum (scalar or ``(wl,)``; default ``sigma``
+            when that is a scalar).
     """
     if not isinstance(stack.exit, LambertianBackground):
         raise LayerstackError("calibration_series: the stack must lie over a LambertianBackground")
@@ -254,5 +267,13 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
     params.append(alpha_parameter(layer, basis=alpha_basis, smoothness=alpha_smoothness))
     if rho_g_basis is not None:
         params.append(rho_g_parameter(basis=rho_g_basis))
-    return Objective(stack, wl, Dataset(geometry, y, sigma=sigma, name="calibration series"), params,
-                     n_samples=y.shape[0])
+    datasets = [Dataset(geometry, y, sigma=sigma, name="calibration series")]
+    if background is not None and rho_g_basis is not None and fit_background:
+        if background_sigma is None and sigma is not None and np.ndim(sigma) > 0:
+            raise LayerstackError("calibration_series: give background_sigma (sigma is per point)")
+        s_bg = sigma if background_sigma is None else background_sigma
+        if (s_bg is None) != (sigma is None):
+            raise LayerstackError("calibration_series: give sigma for both the spectra and the background, or neither")
+        datasets.append(Dataset(background_geometry or geometry, np.asarray(background, float), sigma=s_bg,
+                                name="bare background", bare=True))
+    return Objective(stack, wl, datasets, params, n_samples=y.shape[0])

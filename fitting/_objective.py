@@ -67,6 +67,11 @@ def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
     return path == ("exit", "reflectance") and isinstance(stack.exit, LambertianBackground)
 
 
+def _bare(stack: Stack) -> Stack:
+    """The stack with its layers removed: what a bare-background :class:`Dataset` measures."""
+    return Stack(stack.ambient, [], stack.exit)
+
+
 def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarray:
     """Linear interpolation of ``values`` (``(..., n)`` on ``wavelength_nm``) onto ``grid_nm``.
 
@@ -111,6 +116,11 @@ class Dataset:
         wavelength_nm: the data's own wavelengths if they differ from the model grid
             (resampled linearly; the model grid must lie inside).
         name: label in reports.
+        bare: True for a measurement of the bare exit medium — the stack with all its layers
+            removed (the uncoated background of a calibration series: it pins ρg(λ), which
+            otherwise trades off against α(λ) where the coating is dark). One spectrum,
+            ``(wl,)`` or ``(1, wl)``, whatever the number of samples; only shared parameters
+            (ρg, n_g) reach it.
     """
 
     geometry: Geometry
@@ -120,6 +130,7 @@ class Dataset:
     mask: object = None
     wavelength_nm: object = None
     name: str = ""
+    bare: bool = False
 
     @property
     def label(self) -> str:
@@ -193,8 +204,11 @@ def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int
         # a model point is used only if both neighbouring data points are
         m = resample(wl_data, mask.astype(float), grid, what=label)
         mask = m > 1 - 1e-12
+    if ds.bare and n_samples is not None:
+        n_samples = 1
     if n_samples is not None and y.shape[0] != n_samples:
-        raise LayerstackError(f"{label}: {y.shape[0]} spectra for {n_samples} samples")
+        raise LayerstackError(f"{label}: {y.shape[0]} spectra for {n_samples} samples"
+                              + (" (a bare-background dataset holds one spectrum)" if ds.bare else ""))
     y = np.where(mask, y, 0.0)
     return y, np.where(mask, weight, 0.0), mask
 
@@ -230,7 +244,7 @@ class Objective:
             if not isinstance(p, Parameter):
                 raise LayerstackError(f"parameters must be fitting.Parameter objects, got {p!r}")
         if n_samples is None:
-            d0 = np.asarray(datasets[0].data)
+            d0 = np.asarray(next((ds for ds in datasets if not ds.bare), datasets[0]).data)
             n_samples = 1 if d0.ndim == 1 else d0.shape[0]
         prepared = [_prepare(ds, grid, n_samples, i) for i, ds in enumerate(datasets)]
         self.stack = stack
@@ -264,7 +278,8 @@ class Objective:
                 out.append(None)
             else:
                 try:
-                    out.append(fixed_optics(self.stack, self.wavelength, ds.geometry, nodes=self.nodes))
+                    stack = _bare(self.stack) if ds.bare else self.stack
+                    out.append(fixed_optics(stack, self.wavelength, ds.geometry, nodes=self.nodes))
                 except LayerstackError as e:
                     raise LayerstackError(f"dataset {ds.label}: {e}") from None
         return tuple(out)
@@ -283,7 +298,7 @@ class Objective:
         ys = []
         for i, (ds, y) in enumerate(zip(self.datasets, data)):
             new = dataclasses.replace(ds, data=y, mask=self._mask[i] if ds.wavelength_nm is None else ds.mask)
-            ys.append(jnp.asarray(_prepare(new, self.wavelength, self.n_samples, i)[0]))
+            ys.append(jnp.asarray(_prepare(new, self.wavelength, self.samples_of(i), i)[0]))
         return (tuple(ys), self._weight)
 
     def batch_args(self, data):
@@ -297,11 +312,12 @@ class Objective:
         ys, ws, n = [], [], None
         for i, (ds, y) in enumerate(zip(self.datasets, data)):
             y = np.asarray(y, dtype=float)
-            if y.ndim == 2 and self.n_samples == 1:
+            k = self.samples_of(i)
+            if y.ndim == 2 and k == 1:
                 y = y[:, None, :]
-            if y.ndim != 3 or y.shape[1] != self.n_samples:
+            if y.ndim != 3 or y.shape[1] != k:
                 raise LayerstackError(
-                    f"dataset {i} ({ds.label}): batch data must be shaped (N, {self.n_samples}, wl), got {y.shape}"
+                    f"dataset {i} ({ds.label}): batch data must be shaped (N, {k}, wl), got {y.shape}"
                 )
             if n is None:
                 n = y.shape[0]
@@ -321,9 +337,13 @@ class Objective:
             if ds.weights is not None and np.ndim(ds.weights) < 2:
                 flat = dataclasses.replace(flat, weights=ds.weights)
             yy, _, _ = _prepare(flat, self.wavelength, None, i)
-            ys.append(jnp.asarray(yy.reshape(n, self.n_samples, -1)))
+            ys.append(jnp.asarray(yy.reshape(n, k, -1)))
             ws.append(jnp.broadcast_to(self._weight[i], (n,) + self._weight[i].shape))
         return (tuple(ys), tuple(ws)), n
+
+    def samples_of(self, i: int) -> int:
+        """Rows of dataset ``i``: the number of samples, or 1 for a bare-background dataset."""
+        return 1 if self.datasets[i].bare else self.n_samples
 
     def stack_for(self, x, sample: int = 0) -> Stack:
         """The template stack with the parameters ``x`` put in, for ``sample``."""
@@ -339,20 +359,30 @@ class Objective:
         shared = [None if ps else c for c, ps in zip(coefficients, per)]
         own = [c if ps else None for c, ps in zip(coefficients, per)]
         grid = self.wavelength
-        geometries = [ds.geometry for ds in self.datasets]
         nodes = self.nodes
+        optics = optics or (None,) * len(self.datasets)
+        coated = [i for i, ds in enumerate(self.datasets) if not ds.bare]
 
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            return tuple(_measure(st, grid, g, nodes, o) for g, o in zip(geometries, optics or (None,) * len(geometries)))
+            return tuple(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i]) for i in coated)
 
         if any(per):
             out = jax.vmap(one)(own)
         else:
             single = one(own)
             out = tuple(jnp.broadcast_to(v, (self.n_samples,) + v.shape[-1:]) for v in single)
-        return tuple(jnp.reshape(v, (self.n_samples, grid.size)) for v in out)
+        result = dict(zip(coated, (jnp.reshape(v, (self.n_samples, grid.size)) for v in out)))
+        bare = [i for i, ds in enumerate(self.datasets) if ds.bare]
+        if bare:
+            # per-sample parameters live in the removed layers: any sample's values will do
+            first = [jnp.reshape(c, (self.n_samples, -1))[0] if ps else None for c, ps in zip(coefficients, per)]
+            cs = [f if ps else s for s, f, ps in zip(shared, first, per)]
+            st = _bare(self.layout.inject(self.stack, cs, None))
+            for i in bare:
+                result[i] = jnp.reshape(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i]), (1, grid.size))
+        return tuple(result[i] for i in range(len(self.datasets)))
 
     def penalty(self, x):
         """Smoothness residuals :math:`\\sqrt{\\mu}\\,\\Delta^2 (B c)` of spectral parameters."""

@@ -47,15 +47,20 @@ def linearised_covariance(J, x, scale, rank_rtol: float):
     norms = np.linalg.norm(Jr, axis=-2)
     safe = np.where(norms > 0, norms, 1.0)
     Jn = Jr / safe[..., None, :]
+    # a fit that ended on non-finite values has no linearisation: NaN covariance, no rank claim
+    bad = ~np.all(np.isfinite(Jn), axis=(-2, -1))
+    Jn = np.where(bad[..., None, None], 0.0, Jn)
     _, sv, Vt = np.linalg.svd(Jn, full_matrices=False)
     top = sv[..., :1]
     keep = (sv > rank_rtol * top) & (top > 0)
-    rank = keep.sum(axis=-1)
+    rank = np.where(bad, J.shape[-1], keep.sum(axis=-1))
+    sv = np.where(bad[..., None], np.nan, sv)
     inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
     cov_n = np.einsum("...ki,...k,...kj->...ij", Vt, inv, Vt)
     a = rel / safe  # J = Jn diag(1/a)
     cov_z = cov_n * a[..., :, None] * a[..., None, :]
     cov = cov_z * scale[..., :, None] * scale[..., None, :]
+    cov = np.where(bad[..., None, None], np.nan, cov)
     dirs = Vt / safe[..., None, :]
     dirs = dirs / np.maximum(np.max(np.abs(dirs), axis=-1, keepdims=True), 1e-300)
     return cov, sv, rank, Vt, dirs
@@ -276,12 +281,13 @@ class FitResult:
         for k, ds in enumerate(obj.datasets):
             top, bottom = axes[0, k], axes[1, k]
             mask = obj._mask[k]
-            for s in range(obj.n_samples):
+            rows = obj.samples_of(k)
+            for s in range(rows):
                 color = f"C{s % 10}"
                 y = np.where(mask[s], self.data[k][s], np.nan)
                 top.plot(wl, y, ".", ms=3, color=color, alpha=0.6)
                 top.plot(wl, self.model[k][s], "-", lw=1.4, color=color,
-                         label=f"sample {s}" if obj.n_samples > 1 else "fit")
+                         label=f"sample {s}" if rows > 1 else "fit")
                 bottom.plot(wl, self.residuals[k][s], "-", lw=1.0, color=color)
             top.set_title(ds.label, fontsize=10)
             top.set_ylabel("reflectance")

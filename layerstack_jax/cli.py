@@ -285,10 +285,13 @@ def _add_fit_parser(sub) -> None:
                    help="model grid (default: the data's wavelengths); data are resampled onto it, never extrapolated")
     p.add_argument("--sigma", type=float, metavar="S",
                    help="standard deviation of every data point (absolute uncertainties); default: scale by reduced chi2")
-    p.add_argument("--method", default="lm", choices=("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb"),
-                   help="solver (default lm; lbfgsb keeps bounds exactly)")
+    p.add_argument("--method", default="lm", choices=("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb", "trf"),
+                   help="solver (default lm; lbfgsb and trf keep bounds exactly; trf: scipy's bounded least squares, for joint fits)")
     p.add_argument("--columns", metavar="A,B,...", help="fit only these spectrum columns (default: all)")
     p.add_argument("--joint", action="store_true", help="fit all spectra together (calibration series)")
+    p.add_argument("--background", metavar="COLUMN",
+                   help="with --joint: the column measured on the bare background (no layers); fitted together with "
+                        "the coated samples, it pins rho_g where they are dark")
     p.add_argument("--starts", type=_positive_int, default=1, metavar="K", help="multi-start with K starting points")
     p.add_argument("--max-steps", type=_positive_int, default=256, metavar="N", help="solver step limit (default 256)")
     p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
@@ -332,11 +335,20 @@ def _cmd_fit(args) -> int:
             if missing or not wanted:
                 raise LayerstackError(f"{args.data}: no column(s) {missing or args.columns!r}; columns: {', '.join(names)}")
             names = wanted
+        if args.background is not None:
+            if not args.joint:
+                raise LayerstackError("--background needs --joint (the bare background is fitted with the samples)")
+            if args.background not in columns:
+                raise LayerstackError(f"{args.data}: no column {args.background!r} (--background); columns: {', '.join(names)}")
+            names = [n for n in names if n != args.background]
         Y = np.stack([columns[n] for n in names])
         own_grid = None if args.wavelengths is None else data_wl
 
         def objective(rows):
-            ds = fitting.Dataset(geometry, rows, sigma=args.sigma, wavelength_nm=own_grid, name=Path(args.data).name)
+            ds = [fitting.Dataset(geometry, rows, sigma=args.sigma, wavelength_nm=own_grid, name=Path(args.data).name)]
+            if args.background is not None:
+                ds.append(fitting.Dataset(geometry, columns[args.background], sigma=args.sigma, wavelength_nm=own_grid,
+                                          name=f"{args.background} (bare background)", bare=True))
             try:
                 return fitting.Objective(stack, grid, ds, params, n_samples=rows.shape[0], nodes=args.nodes)
             except LayerstackError as e:
@@ -363,6 +375,7 @@ def _cmd_fit(args) -> int:
         "data": str(args.data),
         "geometry": args.geometry,
         "joint": bool(args.joint),
+        "background": args.background,
         "fits": [{"spectrum": name, **r.to_dict()} for name, r in results],
     }
     out.write_text(json.dumps(payload, indent=1))

@@ -141,6 +141,46 @@ def test_calibration_series_joint_exact_recovery(calibration):
     assert "(fixed)" in r.report()
 
 
+def test_calibration_series_trf_exact_recovery_and_bound(calibration):
+    """scipy's bounded trust-region solver on the joint fit: exact recovery; then, with the last α
+    coefficient's truth at 0 (its bound), that coefficient is found exactly on the bound."""
+    obj, hs, a_true, r_true, rho, bare, geometry, wl = calibration
+    r = ft.fit(obj, method="trf")
+    assert r.converged, r.reason
+    np.testing.assert_allclose(r.values["thickness[varnish]"], hs, rtol=1e-6)
+    np.testing.assert_allclose(r.values["alpha[varnish]"], a_true, rtol=1e-6)
+    np.testing.assert_allclose(r.values["rho_g"], r_true, rtol=1e-6)
+    assert r.method == "trf" and r.num_steps < 100
+
+
+def test_bare_background_dataset(calibration):
+    """The calibration series fits the bare-background spectrum too (Dataset(bare=True)): its
+    model is the stack without layers, one row whatever the number of samples."""
+    obj, hs, a_true, r_true, rho, bare, geometry, wl = calibration
+    assert [ds.bare for ds in obj.datasets] == [False, True]
+    x = obj.layout.x0.copy()
+    model = obj.predict(jnp.asarray(x))
+    assert model[0].shape == (3, wl.size) and model[1].shape == (1, wl.size)
+    rho_start = obj.layout.values(x)["rho_g"]
+    expected = ls.reflectance(ls.Stack(1.0, [], ls.LambertianBackground(1.5, ft.bspline_basis(wl, 6) @ rho_start)),
+                              wl, geometry)
+    np.testing.assert_allclose(model[1][0], expected, rtol=0, atol=1e-14)
+    # without it (fit_background=False) the objective has the coated spectra only
+    lone = ft.calibration_series(obj.stack, wl, np.asarray(obj._data[0]), geometry, layer="varnish",
+                                 thicknesses=hs, alpha_basis=5, rho_g_basis=6, background=bare, fit_background=False)
+    assert len(lone.datasets) == 1
+    with pytest.raises(ls.LayerstackError, match="one spectrum"):
+        ft.Objective(obj.stack, wl, [ft.Dataset(geometry, np.asarray(obj._data[0])),
+                                     ft.Dataset(geometry, np.stack([bare, bare]), bare=True)],
+                     [ft.thickness("varnish", per_sample=True, value=hs)])
+
+
+def test_trf_is_refused_by_fit_batch(incoherent):
+    obj, truth = incoherent
+    with pytest.raises(ls.LayerstackError, match="host"):
+        ft.fit_batch(obj, np.stack([truth, truth]), method="trf")
+
+
 # ----------------------------------------------------------------- mixed stacks
 def test_mixed_coherent_incoherent_45_0():
     """A 300 nm coherent film on 20 µm varnish on paint, 45/0: film and varnish thicknesses."""
@@ -168,11 +208,12 @@ def _slab(h, a):
 T0 = ls.Specular(0.0, "T")
 
 
-def test_optimum_on_bound_found_exactly_by_lbfgsb():
+@pytest.mark.parametrize("method", ["lbfgsb", "trf"])
+def test_optimum_on_bound_found_exactly(method):
     """Data 2 % brighter than the transparent slab allow: the least-squares α is 0, on the bound."""
     y = 1.02 * np.asarray(ls.reflectance(_slab(10_000.0, 0.0), WL, T0))
     obj = ft.Objective(_slab(10_000.0, 5e-6), WL, ft.Dataset(T0, y), [ft.alpha("slab")])
-    r = ft.fit(obj, method="lbfgsb")
+    r = ft.fit(obj, method=method)
     assert r.converged, r.reason
     assert float(r.values["alpha[slab]"]) == 0.0
     assert "on a bound: alpha[slab]" in r.report()

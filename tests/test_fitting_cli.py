@@ -99,3 +99,53 @@ def test_cli_fit_errors(tmp_path, capsys):
     plain.write_text(STACK.format(alpha="2e-5").replace("{ value = 8000, free = true, min = 0, max = 1e5 }", "8000"))
     assert main(["fit", str(plain), str(data), "-g", "specular:0:T", "-o", out]) == 2
     assert "no free parameter" in capsys.readouterr().err
+
+
+BG_STACK = """
+[[layers]]
+name = "varnish"
+n = 1.5
+thickness_nm = { value = 15000, free = true, per_sample = true, min = 0, max = 1e5 }
+coherent = false
+alpha_per_nm = 2e-5
+
+[background]
+n = 1.5
+rho_g = { value = 0.5, free = true, basis = 4 }
+"""
+
+
+def test_cli_joint_fit_with_bare_background(tmp_path, capsys):
+    """`--joint --background COLUMN`: per-sample thicknesses and a shared ρg(λ) (4 B-splines),
+    the bare-background column fitted as the stack without layers; noise-free data come back."""
+    import fitting
+
+    geometry = ls.Directional(45.0, 0.0)
+    rho = fitting.bspline_basis(WL, 4) @ np.array([0.2, 0.6, 0.3, 0.7])
+
+    def measured(layers):
+        return np.asarray(ls.reflectance(ls.Stack(1.0, layers, ls.LambertianBackground(1.5, rho)), WL, geometry))
+
+    hs = [8_000.0, 20_000.0]
+    cols = {f"h{i}": measured([ls.Layer(1.5, h, coherent=False, alpha=2e-5, name="varnish")]) for i, h in enumerate(hs)}
+    cols["bare"] = measured([])
+    stack = tmp_path / "s.toml"
+    stack.write_text(BG_STACK)
+    data = tmp_path / "d.csv"
+    save_spectra_csv(data, WL, cols)
+    out = tmp_path / "r.json"
+    code = main(["fit", str(stack), str(data), "-g", "45/0", "--joint", "--background", "bare", "--method", "trf",
+                 "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "bare background" in text
+    fit = json.loads(out.read_text())["fits"][0]
+    assert fit["spectrum"] == "h0+h1"
+    h = fit["parameters"]["thickness_nm[varnish]"]["value"]
+    np.testing.assert_allclose(h, hs, rtol=1e-6)
+    np.testing.assert_allclose(fit["parameters"]["rho_g"]["value"], [0.2, 0.6, 0.3, 0.7], rtol=1e-6)
+    # --background without --joint, or naming a missing column: exit 2 with the reason
+    assert main(["fit", str(stack), str(data), "-g", "45/0", "--background", "bare", "-o", str(out)]) == 2
+    assert "--background needs --joint" in capsys.readouterr().err
+    assert main(["fit", str(stack), str(data), "-g", "45/0", "--joint", "--background", "nope", "-o", str(out)]) == 2
+    assert "no column 'nope'" in capsys.readouterr().err

@@ -153,6 +153,19 @@ def test_calibration_series_trf_exact_recovery_and_bound(calibration):
     assert r.method == "trf" and r.num_steps < 100
 
 
+def test_lm_stops_like_gauss_newton_at_the_noise_floor(incoherent):
+    """Noisy data: once the cost is at round-off, LM's trust-region ratio is noise. The
+    RoundoffTrustRegion accepts those steps, so LM stops with Gauss–Newton (optimistix's
+    classical update shrank the region instead: 23 steps against 9 on benchmark F1)."""
+    obj, truth = incoherent
+    noisy = truth + 0.002 * np.random.default_rng(1).standard_normal(truth.shape)
+    lm = ft.fit(obj, "lm", data=[noisy[None]])
+    gn = ft.fit(obj, "gauss-newton", data=[noisy[None]])
+    assert lm.converged and gn.converged
+    np.testing.assert_allclose(lm.x, gn.x, rtol=1e-8)
+    assert lm.num_steps <= gn.num_steps + 2, (lm.num_steps, gn.num_steps)
+
+
 def test_bare_background_dataset(calibration):
     """The calibration series fits the bare-background spectrum too (Dataset(bare=True)): its
     model is the stack without layers, one row whatever the number of samples."""

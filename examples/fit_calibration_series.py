@@ -1,8 +1,9 @@
 """Fit the synthetic calibration series of examples/ and print the report.
 
 Joint fit (fitting.calibration_series): the four varnish samples share α(λ) (10 B-splines) and
-ρg(λ) fixed to the inversion of the bare-background column (Simonot eq. 87);
-each has its own thickness, the first (10 µm) taken as known — an incoherent layer's spectra
+ρg(λ) (one value per wavelength, started from the inversion of the bare-background column,
+Simonot eq. 87, and fitted together with that column as a bare-background dataset); each has
+its own thickness, the first (10 µm) taken as known — an incoherent layer's spectra
 depend on α and h only through α·h, so one thickness must be measured independently.
 
 Run: python examples/fit_calibration_series.py   (after make_calibration_series.py, or with the
@@ -36,7 +37,7 @@ def main() -> None:
     geometry = ls.Directional(45.0, 0.0)
     objective = fitting.calibration_series(
         template, wl, spectra, geometry, layer="varnish", thicknesses=[10_000.0, 15_000.0, 30_000.0, 60_000.0],
-        known=(0,), alpha_basis=10, rho_g_basis=None, background=columns["background"], sigma=0.002,
+        known=(0,), alpha_basis=10, rho_g_basis="free", background=columns["background"], sigma=0.002,
     )
     start = time.perf_counter()
     result = fitting.fit(objective)

@@ -217,7 +217,7 @@ def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1
 def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry, *, layer=0, thicknesses=None,
                        alpha_basis=20, rho_g_basis: Optional[int] = 20, background=None, background_geometry=None,
                        known=(0,), sigma=None, alpha_smoothness: float = 0.0, fit_background: bool = True,
-                       background_sigma=None) -> Objective:
+                       background_sigma=None, nodes: Optional[int] = None) -> Objective:
     """Joint objective of a calibration series (see the module docstring).
 
     Args:
@@ -243,6 +243,8 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
             coated samples are dark and ρg would otherwise trade off against α(λ).
         background_sigma: σ of the background spectrum (scalar or ``(wl,)``; default ``sigma``
             when that is a scalar).
+        nodes: quadrature nodes per segment of the diffuse integrals (default
+            :data:`layerstack_jax.DEFAULT_NODES`), for the fit and the ρg inversion.
     """
     if not isinstance(stack.exit, LambertianBackground):
         raise LayerstackError("calibration_series: the stack must lie over a LambertianBackground")
@@ -256,7 +258,7 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
         if np.ndim(n_g):
             raise LayerstackError("calibration_series: the background index must be a constant to invert ρg")
         rho = background_rho_g(wl, background, background_geometry or geometry, float(n_g),
-                               float(np.real(np.asarray(stack.ambient(wl)))))
+                               float(np.real(np.asarray(stack.ambient(wl)))), nodes=nodes)
         stack = dataclasses.replace(stack, exit=LambertianBackground(stack.exit.index, rho))
     fixed = np.zeros(y.shape[0], bool)
     for s in known:
@@ -276,4 +278,5 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
             raise LayerstackError("calibration_series: give sigma for both the spectra and the background, or neither")
         datasets.append(Dataset(background_geometry or geometry, np.asarray(background, float), sigma=s_bg,
                                 name="bare background", bare=True))
-    return Objective(stack, wl, datasets, params, n_samples=y.shape[0])
+    kw = {} if nodes is None else {"nodes": nodes}
+    return Objective(stack, wl, datasets, params, n_samples=y.shape[0], **kw)

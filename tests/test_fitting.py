@@ -181,7 +181,10 @@ def test_bare_background_dataset(calibration):
     # without it (fit_background=False) the objective has the coated spectra only
     lone = ft.calibration_series(obj.stack, wl, np.asarray(obj._data[0]), geometry, layer="varnish",
                                  thicknesses=hs, alpha_basis=5, rho_g_basis=6, background=bare, fit_background=False)
-    assert len(lone.datasets) == 1
+    assert len(lone.datasets) == 1 and lone.nodes == ls.DEFAULT_NODES
+    coarse = ft.calibration_series(obj.stack, wl, np.asarray(obj._data[0]), geometry, layer="varnish",
+                                   thicknesses=hs, alpha_basis=5, rho_g_basis=6, background=bare, nodes=12)
+    assert coarse.nodes == 12 and coarse.optics[0].nodes == 12
     with pytest.raises(ls.LayerstackError, match="one spectrum"):
         ft.Objective(obj.stack, wl, [ft.Dataset(geometry, np.asarray(obj._data[0])),
                                      ft.Dataset(geometry, np.stack([bare, bare]), bare=True)],

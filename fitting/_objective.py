@@ -5,7 +5,7 @@ A :class:`Dataset` is what one instrument geometry read on every sample of the f
 resampled linearly onto the model grid — which must lie inside the data's range: nothing is
 extrapolated), with optional per-point standard deviations σ (or weights) and a mask of valid
 points. An :class:`Objective` joins a template :class:`~layerstack_jax.Stack`, the model grid,
-the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T …).
+the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T …), CIELAB colours of a colorimeter through a :class:`layerstack_jax.ColourSpace`, the bare background).
 
 Residuals (model − data, weighted): for each dataset,
 :math:`r = m\,w\,(f(\lambda; x) - y)` with :math:`w = 1/\sigma` (or the given weights, default 1)
@@ -28,8 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import (DEFAULT_NODES, Ellipsometric, Geometry, LambertianBackground, LayerstackError, Stack,
-                            fixed_optics, reflectance)
+from layerstack_jax import (DEFAULT_NODES, ColourSpace, Ellipsometric, Geometry, LambertianBackground,
+                            LayerstackError, Stack, fixed_optics, reflectance)
 from layerstack_jax._geometry import BRDF, Directional, Specular, Sphere
 
 from ._parameters import Layout, Parameter, resolve_parameter
@@ -51,12 +51,14 @@ def _geometry_label(g: Geometry) -> str:
     return type(g).__name__
 
 
-def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None):
+def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None, colour=None):
     """What the instrument of geometry ``g`` reads: ψ/Δ for an ellipsometer, else
-    :func:`layerstack_jax.reflectance` (reusing ``optics``, a :class:`layerstack_jax.Optics`, if given)."""
+    :func:`layerstack_jax.reflectance` (reusing ``optics``, a :class:`layerstack_jax.Optics`, if given),
+    converted to CIELAB by ``colour`` (a :class:`layerstack_jax.ColourSpace`) if given."""
     if isinstance(g, Ellipsometric):
         return g.measure(stack, grid)
-    return reflectance(stack, grid, g, nodes=nodes, optics=optics)
+    spectrum = reflectance(stack, grid, g, nodes=nodes, optics=optics)
+    return spectrum if colour is None else colour.Lab(spectrum)
 
 
 def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
@@ -116,6 +118,11 @@ class Dataset:
         wavelength_nm: the data's own wavelengths if they differ from the model grid
             (resampled linearly; the model grid must lie inside).
         name: label in reports.
+        colour: a :class:`layerstack_jax.ColourSpace` on the model grid: residuals in CIELAB.
+            The model spectra are converted to L*, a*, b* (observer and illuminant of the colour
+            space); ``data`` are CIELAB values ``(samples, 3)`` (a colorimeter's readings) or
+            spectra ``(samples, wl)`` converted once; σ is then in ΔE*ab units (scalar, ``(3,)``
+            or ``(samples, 3)``), so χ² sums ΔE*ab²/σ².
         bare: True for a measurement of the bare exit medium — the stack with all its layers
             removed (the uncoated background of a calibration series: it pins ρg(λ), which
             otherwise trades off against α(λ) where the coating is dark). One spectrum,
@@ -130,18 +137,71 @@ class Dataset:
     mask: object = None
     wavelength_nm: object = None
     name: str = ""
+    colour: object = None
     bare: bool = False
 
     @property
     def label(self) -> str:
-        return self.name or _geometry_label(self.geometry)
+        return self.name or (_geometry_label(self.geometry) + (" CIELAB" if self.colour is not None else ""))
+
+
+def _prepare_colour(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], label: str):
+    """:func:`_prepare` for a CIELAB dataset: ``(data, weight, mask)`` shaped ``(samples, 3)``."""
+    cs = ds.colour
+    if not isinstance(cs, ColourSpace):
+        raise LayerstackError(f"{label}: colour must be a layerstack_jax.ColourSpace, got {type(cs).__name__}")
+    if len(cs.wavelength_nm) != grid.size or not np.allclose(cs.wavelength_nm, grid, rtol=0, atol=1e-9):
+        raise LayerstackError(f"{label}: the colour space must be built on the model wavelength grid")
+    if ds.mask is not None:
+        raise LayerstackError(f"{label}: masks are for spectra; a CIELAB dataset uses all three coordinates")
+    y = np.asarray(ds.data, dtype=float)
+    if y.ndim == 1:
+        y = y[None]
+    if y.ndim != 2:
+        raise LayerstackError(f"{label}: data must be CIELAB (samples, 3) or spectra (samples, wl), got {y.shape}")
+    if not np.all(np.isfinite(y)):
+        raise LayerstackError(f"{label}: NaN or infinite data")
+    spectral = y.shape[1] != 3 or ds.wavelength_nm is not None
+    if spectral:
+        wl_data = grid if ds.wavelength_nm is None else np.asarray(ds.wavelength_nm, dtype=float)
+        if y.shape[1] != wl_data.size:
+            raise LayerstackError(f"{label}: data are neither CIELAB (3 columns) nor spectra on the grid ({wl_data.size})")
+        if np.any(y < 0):
+            raise LayerstackError(f"{label}: negative reflectance in the spectra to convert to CIELAB")
+        if ds.wavelength_nm is not None:
+            y = resample(wl_data, y, grid, what=label)
+        y = np.asarray(cs.Lab(y))
+    if ds.sigma is not None and ds.weights is not None:
+        raise LayerstackError(f"{label}: give sigma or weights, not both")
+    if n_samples is not None and y.shape[0] != n_samples:
+        raise LayerstackError(f"{label}: {y.shape[0]} colours for {n_samples} samples")
+    given = ds.sigma if ds.sigma is not None else ds.weights
+    try:
+        v = np.broadcast_to(np.asarray(1.0 if given is None else given, dtype=float), y.shape).astype(float)
+    except ValueError:
+        raise LayerstackError(f"{label}: {'sigma' if ds.sigma is not None else 'weights'} shaped "
+                              f"{np.shape(given)} does not match the CIELAB data {y.shape}") from None
+    if ds.sigma is not None:
+        if not np.all(np.isfinite(v) & (v > 0)):
+            raise LayerstackError(f"{label}: sigma must be finite and > 0")
+        weight = 1.0 / v
+    else:
+        if not np.all(np.isfinite(v) & (v >= 0)):
+            raise LayerstackError(f"{label}: weights must be finite and >= 0")
+        weight = v
+    return y, weight, np.ones(y.shape, bool)
 
 
 def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int):
-    """Checked ``(data, weight, mask)`` arrays shaped ``(samples, wl)`` on the model grid."""
+    """Checked ``(data, weight, mask)`` arrays shaped ``(samples, wl)`` on the model grid
+    (``(samples, 3)`` for a CIELAB dataset)."""
     label = f"dataset {index} ({ds.label})"
     if not isinstance(ds.geometry, Geometry):
         raise LayerstackError(f"{label}: geometry must be a layerstack_jax Geometry, got {ds.geometry!r}")
+    if ds.bare and n_samples is not None:
+        n_samples = 1
+    if ds.colour is not None:
+        return _prepare_colour(ds, grid, n_samples, label)
     y = np.asarray(ds.data, dtype=float)
     if y.ndim == 1:
         y = y[None]
@@ -204,8 +264,6 @@ def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int
         # a model point is used only if both neighbouring data points are
         m = resample(wl_data, mask.astype(float), grid, what=label)
         mask = m > 1 - 1e-12
-    if ds.bare and n_samples is not None:
-        n_samples = 1
     if n_samples is not None and y.shape[0] != n_samples:
         raise LayerstackError(f"{label}: {y.shape[0]} spectra for {n_samples} samples"
                               + (" (a bare-background dataset holds one spectrum)" if ds.bare else ""))
@@ -297,7 +355,8 @@ class Objective:
             raise LayerstackError(f"data: give one array per dataset ({len(self.datasets)})")
         ys = []
         for i, (ds, y) in enumerate(zip(self.datasets, data)):
-            new = dataclasses.replace(ds, data=y, mask=self._mask[i] if ds.wavelength_nm is None else ds.mask)
+            mask = None if ds.colour is not None else self._mask[i] if ds.wavelength_nm is None else ds.mask
+            new = dataclasses.replace(ds, data=y, mask=mask)
             ys.append(jnp.asarray(_prepare(new, self.wavelength, self.samples_of(i), i)[0]))
         return (tuple(ys), self._weight)
 
@@ -323,7 +382,7 @@ class Objective:
                 n = y.shape[0]
             elif y.shape[0] != n:
                 raise LayerstackError(f"dataset {i} ({ds.label}): {y.shape[0]} fits, dataset 0 has {n}")
-            mask = self._mask[i] if ds.wavelength_nm is None else ds.mask
+            mask = None if ds.colour is not None else self._mask[i] if ds.wavelength_nm is None else ds.mask
             mask_n = None if mask is None else np.broadcast_to(np.asarray(mask), y.shape[1:])
             flat = dataclasses.replace(
                 ds, data=y.reshape(-1, y.shape[-1]),
@@ -366,14 +425,15 @@ class Objective:
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            return tuple(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i]) for i in coated)
+            return tuple(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i], self.datasets[i].colour)
+                         for i in coated)
 
         if any(per):
             out = jax.vmap(one)(own)
         else:
             single = one(own)
             out = tuple(jnp.broadcast_to(v, (self.n_samples,) + v.shape[-1:]) for v in single)
-        result = dict(zip(coated, (jnp.reshape(v, (self.n_samples, grid.size)) for v in out)))
+        result = dict(zip(coated, (jnp.reshape(v, (self.n_samples, -1)) for v in out)))
         bare = [i for i, ds in enumerate(self.datasets) if ds.bare]
         if bare:
             # per-sample parameters live in the removed layers: any sample's values will do
@@ -381,7 +441,8 @@ class Objective:
             cs = [f if ps else s for s, f, ps in zip(shared, first, per)]
             st = _bare(self.layout.inject(self.stack, cs, None))
             for i in bare:
-                result[i] = jnp.reshape(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i]), (1, grid.size))
+                result[i] = jnp.reshape(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i],
+                                                 self.datasets[i].colour), (1, -1))
         return tuple(result[i] for i in range(len(self.datasets)))
 
     def penalty(self, x):

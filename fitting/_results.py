@@ -282,19 +282,23 @@ class FitResult:
             top, bottom = axes[0, k], axes[1, k]
             mask = obj._mask[k]
             rows = obj.samples_of(k)
+            lab = ds.colour is not None
+            x = np.arange(3) if lab else wl
             for s in range(rows):
                 color = f"C{s % 10}"
                 y = np.where(mask[s], self.data[k][s], np.nan)
-                top.plot(wl, y, ".", ms=3, color=color, alpha=0.6)
-                top.plot(wl, self.model[k][s], "-", lw=1.4, color=color,
+                top.plot(x, y, "o" if lab else ".", ms=6 if lab else 3, color=color, alpha=0.6)
+                top.plot(x, self.model[k][s], "x" if lab else "-", ms=8, lw=1.4, color=color,
                          label=f"sample {s}" if rows > 1 else "fit")
-                bottom.plot(wl, self.residuals[k][s], "-", lw=1.0, color=color)
+                bottom.plot(x, self.residuals[k][s], "o-" if lab else "-", lw=1.0, color=color)
             top.set_title(ds.label, fontsize=10)
-            top.set_ylabel("reflectance")
+            top.set_ylabel("CIELAB" if lab else "reflectance")
+            if lab:
+                bottom.set_xticks([0, 1, 2], ["L*", "a*", "b*"])
             top.grid(True, alpha=0.3)
             top.legend(loc="best", frameon=False, fontsize=8)
             bottom.axhline(0.0, color="k", lw=0.6)
-            bottom.set_xlabel("wavelength (nm)")
+            bottom.set_xlabel("CIELAB coordinate" if lab else "wavelength (nm)")
             bottom.set_ylabel("model − data")
             bottom.grid(True, alpha=0.3)
         status = "converged" if self.converged else f"NOT converged ({self.reason})"

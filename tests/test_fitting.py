@@ -191,6 +191,42 @@ def test_bare_background_dataset(calibration):
                      [ft.thickness("varnish", per_sample=True, value=hs)])
 
 
+def test_cielab_residuals(tmp_path):
+    """Colorimeter readings only (L*, a*, b*, D65, 2°) of a yellowed varnish over a red paint at
+    45°/0°: the thickness comes back exactly; the residuals are the CIELAB differences / σ (so
+    χ² = ΔE*ab² / σ²); spectra given instead are converted once; a colour space on another
+    grid is refused."""
+    wl = np.linspace(380.0, 780.0, 81)
+    cs = ls.ColourSpace(wl)
+    alpha = 4e-5 * np.exp(-(wl - 380.0) / 60.0)
+    rho = 0.1 + 0.6 / (1 + np.exp(-(wl - 600.0) / 20.0))
+
+    def stack(h):
+        return ls.Stack(1.0, [ls.Layer(1.52, h, coherent=False, alpha=alpha, name="varnish")],
+                        ls.LambertianBackground(1.5, rho))
+
+    spectrum = np.asarray(ls.reflectance(stack(25_000.0), wl, DIRECTIONAL))
+    lab = np.asarray(cs.Lab(spectrum))
+    obj = ft.Objective(stack(15_000.0), wl, ft.Dataset(DIRECTIONAL, lab, sigma=0.5, colour=cs),
+                       [ft.thickness("varnish")])
+    start = np.asarray(cs.Lab(ls.reflectance(stack(15_000.0), wl, DIRECTIONAL)))
+    r0 = np.asarray(obj.residuals(jnp.asarray(obj.layout.x0), obj.args()))
+    assert r0.shape == (3,)
+    assert np.sum(r0 ** 2) * 0.5 ** 2 == pytest.approx(float(ls.delta_e_ab(start, lab)) ** 2, rel=1e-10)
+    r = ft.fit(obj)
+    assert r.converged, r.reason
+    assert r.values["thickness[varnish]"] == pytest.approx(25_000.0, rel=1e-6)
+    assert "CIELAB" in r.report()
+    r.plot(tmp_path / "lab.png")
+    assert (tmp_path / "lab.png").stat().st_size > 5_000 and '"residuals"' in r.to_json()
+    from_spectra = ft.Objective(stack(15_000.0), wl, ft.Dataset(DIRECTIONAL, spectrum, sigma=0.5, colour=cs),
+                                [ft.thickness("varnish")])
+    np.testing.assert_allclose(np.asarray(from_spectra.args()[0][0]), lab[None], rtol=1e-12)
+    with pytest.raises(ls.LayerstackError, match="colour space must be built on the model wavelength grid"):
+        ft.Objective(stack(15_000.0), wl, ft.Dataset(DIRECTIONAL, lab, colour=ls.ColourSpace(np.linspace(380, 780, 41))),
+                     [ft.thickness("varnish")])
+
+
 def test_trf_is_refused_by_fit_batch(incoherent):
     obj, truth = incoherent
     with pytest.raises(ls.LayerstackError, match="host"):

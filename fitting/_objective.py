@@ -5,7 +5,8 @@ A :class:`Dataset` is what one instrument geometry read on every sample of the f
 resampled linearly onto the model grid — which must lie inside the data's range: nothing is
 extrapolated), with optional per-point standard deviations σ (or weights) and a mask of valid
 points. An :class:`Objective` joins a template :class:`~layerstack_jax.Stack`, the model grid,
-the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T …), CIELAB colours of a colorimeter through a :class:`layerstack_jax.ColourSpace`, the bare background).
+the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T,
+CIELAB colours of a colorimeter through a :class:`layerstack_jax.ColourSpace`, the bare background).
 
 Residuals (model − data, weighted): for each dataset,
 :math:`r = m\,w\,(f(\lambda; x) - y)` with :math:`w = 1/\sigma` (or the given weights, default 1)

@@ -269,6 +269,8 @@ def test_optimum_on_bound_found_exactly(method):
     assert r.converged, r.reason
     assert float(r.values["alpha[slab]"]) == 0.0
     assert "on a bound: alpha[slab]" in r.report()
+    multi = ft.fit(obj, method=method, starts=3)  # host solver: one solve per start
+    assert multi.converged and multi.starts_converged >= 1 and float(multi.values["alpha[slab]"]) == 0.0
 
 
 def test_non_identifiable_alpha_times_thickness_is_named():

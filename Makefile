@@ -18,7 +18,7 @@ demo: $(STAMP)
 	mkdir -p out
 	# main job: fit the shipped (synthetic, labelled) calibration series of a varnish over a red paint
 	$(PY) examples/fit_calibration_series.py
-	$(PY) -m layerstack_jax.cli fit examples/calibration_fit.toml examples/calibration_series.csv -g 45/0 --columns h10um,h20um,h40um,h80um --sigma 0.002 -o out/calibration_fit.json --plot out/calibration_fit.png
+	$(PY) -m layerstack_jax.cli fit examples/calibration_fit.toml examples/calibration_series.csv -g 45/0 --joint --background background --sigma 0.002 -o out/calibration_fit.json --plot out/calibration_fit.png
 	$(PY) -m layerstack_jax.cli predict examples/varnished_painting.toml --wavelengths 380:780:5 --geometry 45/0 -o out/varnished_painting_45-0.csv --plot out/varnished_painting_45-0.png
 	$(PY) -m layerstack_jax.cli predict examples/thin_film_on_metal.toml --wavelengths 380:780:5 --geometry specular:30 -o out/thin_film_on_metal.csv --plot out/thin_film_on_metal.png
 	# design: a four-layer broadband AR coating from database materials (exit 1 if its targets are not met)

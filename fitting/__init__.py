@@ -51,6 +51,7 @@ from ._parameters import index_n as index_n
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult
+from ._solve import HOST_METHODS as HOST_METHODS
 from ._solve import METHODS as METHODS
 from ._solve import fit as fit
 
@@ -71,6 +72,7 @@ __all__ = [
     "thickness",
     "FitResult",
     "METHODS",
+    "HOST_METHODS",
     "fit",
     "ColourTarget",
     "DesignResult",

@@ -48,6 +48,8 @@ class BatchResult:
         chi2, reduced_chi2: ``(N,)``; rank: ``(N,)`` of the normalised Jacobian;
         covariance_scaled: True if uncertainties are scaled by each fit's reduced χ².
         wall_time_s: wall-clock time of the batch, seconds.
+        results: with ``fit_batch(..., full_results=True)``, one :class:`~fitting.FitResult` per
+            fit (report, residual spectra, covariance, plot, JSON), else None.
 
     Values and errors are in each parameter's own unit (nm for thicknesses, 1/nm for α,
     dimensionless for n and ρg); χ² values are dimensionless.
@@ -68,6 +70,7 @@ class BatchResult:
     rank: np.ndarray
     covariance_scaled: bool
     wall_time_s: float = float("nan")
+    results: Optional[list] = None
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -120,7 +123,7 @@ def _progress_callback(progress) -> Optional[Callable[[int, int], None]]:
 def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int = 128,
               progress: Union[None, bool, Callable[[int, int], None]] = None, max_steps: int = 256,
               rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, scale_covariance: Optional[bool] = None,
-              rank_rtol: float = 1e-8) -> BatchResult:
+              rank_rtol: float = 1e-8, full_results: bool = False) -> BatchResult:
     """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
 
     Args:
@@ -132,6 +135,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             of the same compiled function.
         progress: a callback ``f(done, total)`` called after each chunk, or True for a
             progress bar (tqdm if installed, else a line on stderr).
+        full_results: also build a full :class:`~fitting.FitResult` per fit
+            (``BatchResult.results``; memory grows with N: for tens or hundreds of fits).
 
     Data are in the unit each dataset's geometry reads (a dimensionless reflectance or
     reflectance factor, 1/sr for BRDF, degrees for ψ/Δ). Returns a :class:`BatchResult` with
@@ -185,8 +190,15 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     err = np.where((rank < layout.size)[:, None], np.nan, err)
     values = layout.values(x)
     errors = layout.values(err, fill=np.nan)
+    full = None
+    if full_results:
+        from ._results import build_result
+
+        full = [build_result(objective, o, x[i], int(steps[i]), int(code[i]), [m[i] for m in _model],
+                             [r[i] for r in res], pen[i], J[i], (tuple(y[i] for y in ys), tuple(w[i] for w in ws)),
+                             scale_covariance=scale_covariance, rank_rtol=rank_rtol) for i in range(n)]
     return BatchResult(objective, method, list(layout.names), x, err, values, errors, code == 0, code, steps, chi2,
-                       red, rank, scaled, time.perf_counter() - start_time)
+                       red, rank, scaled, time.perf_counter() - start_time, full)
 
 
 def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1.5, ambient: float = 1.0,

@@ -95,7 +95,8 @@ def test_batch_equals_single_fits(incoherent, n):
     data = truth[None, :] * (1 + 0.05 * rng.standard_normal((n, 1))) + 0.002 * rng.standard_normal((n, WL.size))
     data = np.clip(data, 0.0, None)
     calls = []
-    b = ft.fit_batch(obj, data, chunk_size=CHUNK, progress=lambda done, total: calls.append(done))
+    b = ft.fit_batch(obj, data, chunk_size=CHUNK, progress=lambda done, total: calls.append(done),
+                     full_results=n <= 2 * CHUNK)
     assert calls[-1] == n and len(calls) == -(-n // CHUNK)
     check = range(n) if n <= 2 * CHUNK else rng.choice(n, 20, replace=False)
     for i in check:
@@ -103,6 +104,11 @@ def test_batch_equals_single_fits(incoherent, n):
         assert bool(b.converged[i]) == s.converged
         np.testing.assert_allclose(b.x[i], s.x, rtol=1e-7)
         np.testing.assert_allclose(b.stderr[i], s.x_stderr, rtol=1e-6)
+        if b.results is not None:  # the full per-fit results of the batch equal the single fits'
+            full = b.results[i]
+            np.testing.assert_allclose(full.x_stderr, s.x_stderr, rtol=1e-6)
+            np.testing.assert_allclose(full.residuals[0], s.residuals[0], rtol=1e-6, atol=1e-12)
+            assert full.chi2 == pytest.approx(s.chi2, rel=1e-6) and full.converged == s.converged
 
 
 # ------------------------------------------------------------- calibration series

@@ -40,7 +40,7 @@ GROUPS = [
 
 FITTING_GROUPS = [
     ("Fitting: parameters", ("Parameter", "thickness", "alpha", "rho_g", "index_n", "dispersion", "bspline_basis")),
-    ("Fitting: data, objective, solvers", ("Dataset", "Objective", "resample", "fit", "METHODS", "FitResult",
+    ("Fitting: data, objective, solvers", ("Dataset", "Objective", "resample", "fit", "METHODS", "HOST_METHODS", "FitResult",
                                             "fit_batch", "BatchResult", "calibration_series", "background_rho_g")),
     ("Design", ("SpectralTarget", "ColourTarget", "merit", "optimize_thicknesses", "DesignResult",
                 "with_thicknesses", "needle_function", "NeedleScan", "insert_needle", "needle_design",
@@ -189,7 +189,7 @@ def entry(name: str, gaps: list[str], package=layerstack_jax) -> list[str]:
 # tables and database look-ups that return only strings).
 _NO_UNITS_EXPECTED = {"LayerstackError", "Geometry", "Material", "parse_geometry", "read_csv_columns",
                       "stack_to_dict", "DEFAULT_NODES", "Stack", "OBSERVERS", "database_version",
-                      "material_sources", "METHODS"}
+                      "material_sources", "METHODS", "HOST_METHODS"}
 
 
 def _constant_source(name: str, package=layerstack_jax) -> Path:

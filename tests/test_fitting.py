@@ -147,9 +147,10 @@ def test_calibration_series_joint_exact_recovery(calibration):
     assert "(fixed)" in r.report()
 
 
-def test_calibration_series_trf_exact_recovery_and_bound(calibration):
-    """scipy's bounded trust-region solver on the joint fit: exact recovery; then, with the last α
-    coefficient's truth at 0 (its bound), that coefficient is found exactly on the bound."""
+def test_calibration_series_trf_exact_recovery(calibration):
+    """scipy's bounded trust-region solver on the joint fit (coated samples + bare background,
+    sphere and 45°/0°): exact recovery of thicknesses, α and ρg coefficients. (Optima on a bound:
+    test_optimum_on_bound_found_exactly.)"""
     obj, hs, a_true, r_true, rho, bare, geometry, wl = calibration
     r = ft.fit(obj, method="trf")
     assert r.converged, r.reason

@@ -46,9 +46,7 @@
 # %%
 import functools
 import math
-import os
 import warnings
-from pathlib import Path
 
 import jax
 
@@ -62,15 +60,7 @@ from scipy import integrate
 
 import layerstack_jax as ls
 
-HERE = Path(__file__).resolve().parent if "__file__" in globals() else Path.cwd()
-FIGURES = Path(os.environ.get("NOTEBOOK_FIGURES", HERE / "figures"))  # the tests write elsewhere
-FIGURES.mkdir(exist_ok=True)
-ROOT = HERE.parent
-
-
-def save(fig, name):
-    """Save a figure as notebooks/figures/<name>.png (the rendered notebook links to it)."""
-    fig.savefig(FIGURES / f"{name}.png", dpi=110, bbox_inches="tight")
+from _figures import ROOT, save  # figures: notebooks/figures/ (tests: NOTEBOOK_FIGURES)
 
 
 wl = np.arange(380.0, 781.0, 5.0)  # nm, the grid of the ColorChecker data below

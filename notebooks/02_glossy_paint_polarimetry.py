@@ -50,9 +50,7 @@
 
 # %%
 import math
-import os
 import warnings
-from pathlib import Path
 
 import jax
 
@@ -64,14 +62,7 @@ from scipy import integrate
 
 import layerstack_jax as ls
 
-HERE = Path(__file__).resolve().parent if "__file__" in globals() else Path.cwd()
-FIGURES = Path(os.environ.get("NOTEBOOK_FIGURES", HERE / "figures"))  # the tests write elsewhere
-FIGURES.mkdir(exist_ok=True)
-
-
-def save(fig, name):
-    """Save a figure as notebooks/figures/<name>.png (the rendered notebook links to it)."""
-    fig.savefig(FIGURES / f"{name}.png", dpi=110, bbox_inches="tight")
+from _figures import save  # figures: notebooks/figures/ (tests: NOTEBOOK_FIGURES)
 
 
 N_PAINT, RHO_0 = 1.55, 0.75  # Ellis's Fig. 2

@@ -42,8 +42,6 @@
 # for a metal or silicon). Natural light is the mean of s and p.
 
 # %%
-import os
-from pathlib import Path
 
 import jax
 
@@ -57,14 +55,7 @@ import tmm
 
 import layerstack_jax as ls
 
-HERE = Path(__file__).resolve().parent if "__file__" in globals() else Path.cwd()
-FIGURES = Path(os.environ.get("NOTEBOOK_FIGURES", HERE / "figures"))  # the tests write elsewhere
-FIGURES.mkdir(exist_ok=True)
-
-
-def save(fig, name):
-    """Save a figure as notebooks/figures/<name>.png (the rendered notebook links to it)."""
-    fig.savefig(FIGURES / f"{name}.png", dpi=110, bbox_inches="tight")
+from _figures import save  # figures: notebooks/figures/ (tests: NOTEBOOK_FIGURES)
 
 
 # 2 nm steps: the thickest coating (6.8 µm of optical path) has fringes ~20 nm apart at 550 nm

@@ -36,9 +36,7 @@
 # Units: nm for wavelengths and thicknesses, 1/nm for α, degrees in geometries.
 
 # %%
-import os
 import time
-from pathlib import Path
 
 import jax
 
@@ -51,14 +49,7 @@ import numpy as np
 import fitting
 import layerstack_jax as ls
 
-HERE = Path(__file__).resolve().parent if "__file__" in globals() else Path.cwd()
-FIGURES = Path(os.environ.get("NOTEBOOK_FIGURES", HERE / "figures"))  # the tests write elsewhere
-FIGURES.mkdir(exist_ok=True)
-
-
-def save(fig, name):
-    """Save a figure as notebooks/figures/<name>.png (the rendered notebook links to it)."""
-    fig.savefig(FIGURES / f"{name}.png", dpi=110, bbox_inches="tight")
+from _figures import save  # figures: notebooks/figures/ (tests: NOTEBOOK_FIGURES)
 
 
 wl = np.arange(380.0, 781.0, 5.0)  # nm: 81 wavelengths, the grid of the ColorChecker data

@@ -32,8 +32,6 @@
 # Units: nm for wavelengths and thicknesses; normal incidence throughout.
 
 # %%
-import os
-from pathlib import Path
 
 import jax
 
@@ -48,14 +46,7 @@ import tmm
 import fitting
 import layerstack_jax as ls
 
-HERE = Path(__file__).resolve().parent if "__file__" in globals() else Path.cwd()
-FIGURES = Path(os.environ.get("NOTEBOOK_FIGURES", HERE / "figures"))  # the tests write elsewhere
-FIGURES.mkdir(exist_ok=True)
-
-
-def save(fig, name):
-    """Save a figure as notebooks/figures/<name>.png (the rendered notebook links to it)."""
-    fig.savefig(FIGURES / f"{name}.png", dpi=110, bbox_inches="tight")
+from _figures import save  # figures: notebooks/figures/ (tests: NOTEBOOK_FIGURES)
 
 
 # SciPy's L-BFGS-B on the host (method="scipy") starts in a second: only the merit and its

@@ -99,8 +99,13 @@ def resample(wavelength_nm, values, grid_nm, *, what: str = "data") -> np.ndarra
         )
     if w.size == g.size and np.allclose(w, g, rtol=0, atol=tol):
         return v.copy()
-    flat = v.reshape(-1, w.size)
-    return np.stack([np.interp(g, w, row) for row in flat]).reshape(v.shape[:-1] + g.shape)
+    if w.size == 1:
+        return np.broadcast_to(v, v.shape[:-1] + g.shape).copy()
+    # one set of brackets and weights for every spectrum (no loop over rows)
+    gc = np.clip(g, w[0], w[-1])
+    i = np.clip(np.searchsorted(w, gc, side="right") - 1, 0, w.size - 2)
+    t = (gc - w[i]) / (w[i + 1] - w[i])
+    return v[..., i] * (1.0 - t) + v[..., i + 1] * t
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

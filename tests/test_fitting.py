@@ -234,6 +234,20 @@ def test_cielab_residuals(tmp_path):
                      [ft.thickness("varnish")])
 
 
+def test_resample_matches_numpy_interp_and_never_extrapolates():
+    """Linear resampling of many spectra at once equals np.interp row by row (non-uniform data
+    grid); a model grid reaching outside the data raises."""
+    rng = np.random.default_rng(3)
+    w = np.concatenate([[380.0], np.sort(rng.uniform(381.0, 779.0, 60)), [780.0]])
+    v = rng.uniform(size=(3, 5, w.size))
+    g = np.linspace(380.0, 780.0, 97)
+    expected = np.stack([np.interp(g, w, row) for row in v.reshape(-1, w.size)]).reshape(3, 5, g.size)
+    np.testing.assert_allclose(ft.resample(w, v, g), expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(ft.resample(w, v[0, 0], w), v[0, 0])
+    with pytest.raises(ls.LayerstackError, match="never extrapolated"):
+        ft.resample(w, v, np.linspace(370.0, 780.0, 5))
+
+
 def test_trf_is_refused_by_fit_batch(incoherent):
     obj, truth = incoherent
     with pytest.raises(ls.LayerstackError, match="host"):

@@ -362,11 +362,10 @@ def _cmd_fit(args) -> int:
             if any(p.per_sample for p in params):
                 raise LayerstackError(f"{args.stack}: per_sample parameters need --joint")
             obj = objective(Y[:1])
-            rows = [y if own_grid is None else fitting.resample(own_grid, y, grid, what=f"column {name!r}")
-                    for name, y in zip(names, Y)]
+            rows = Y if own_grid is None else fitting.resample(own_grid, Y, grid, what=args.data)
             if args.starts == 1 and args.method not in fitting.HOST_METHODS:
                 # all columns in one compiled, vmapped solve
-                batch = fitting.fit_batch(obj, np.stack(rows), args.method, max_steps=args.max_steps, full_results=True)
+                batch = fitting.fit_batch(obj, rows, args.method, max_steps=args.max_steps, full_results=True)
                 results.extend(zip(names, batch.results))
             else:  # multi-start or a host solver: one fit per column, one compiled solver for all
                 results.extend((name, fitting.fit(obj, args.method, data=[y[None]], starts=args.starts,

@@ -15,11 +15,12 @@ from __future__ import annotations
 from typing import NamedTuple, Optional
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._quadrature import DEFAULT_NODES, hemispherical_rule
-from ._response import Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities
+from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
+from ._response import Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
@@ -100,7 +101,8 @@ def specular(stack: Stack, wavelength_nm, angle_rad, *, both_sides: bool = True)
 
 def _hemisphere(rs: ResolvedStack, side: str, nodes: int):
     """Snell invariants ``s`` and weights ``w`` (``(node, wl)`` or ``(node, 1)``) of the
-    hemispherical rule seen from the ambient (``side='front'``) or the exit medium ('back')."""
+    hemispherical rule seen from the ambient (``side='front'``) or the exit medium ('back'),
+    and the :func:`_reach` of each group of segments."""
     # Split at the critical angle of every other medium. Thin films add no branch point (their
     # response is even in their own q) but a sharp frustrated-TIR feature there, so they count too.
     if side == "front":
@@ -112,18 +114,77 @@ def _hemisphere(rs: ResolvedStack, side: str, nodes: int):
     # at least (1,) so that the node axis stays in front of the wavelength axis
     n_from = np.atleast_1d(np.real(n_from)) if is_concrete(n_from) else jnp.atleast_1d(jnp.real(n_from))
     mu, w = hemispherical_rule(n_from, others, nodes)
-    return jnp.real(jnp.asarray(n_from)) * jnp.sqrt(mu), w
+    return jnp.real(jnp.asarray(n_from)) * jnp.sqrt(mu), w, _reach(rs, side, evanescent_beyond(n_from, others), nodes)
 
 
-def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w) -> Diffuse:
-    out = join_interfaces(rs, interfaces, both_sides=(side == "back"))
-    R, T = (out.R_front, out.T_front) if side == "front" else (out.R_back, out.T_back)
-    return Diffuse(jnp.sum(w * natural(R), axis=0), jnp.sum(w * natural(T), axis=0))
+def _reach(rs: ResolvedStack, side: str, beyond, nodes: int):
+    r"""Which packets light from ``side`` can reach, segment by segment of the hemispherical rule.
+
+    Past the critical angle of a thick medium of real index, the packet in front of it carries
+    no power into it (Re q = 0: total internal reflection, frustrated or not by coherent films),
+    so the layers behind it do not change the response: their Beer factors are exactly zero.
+    Those segments need only the packets up to that medium — on P2-like stacks (a varnish of
+    n ≈ 1.5 over a background of n_g ≈ 1.52) half of the back-side nodes never touch the
+    thicknesses or α, so a fit or a batch evaluates their adding rule once, not per sample.
+
+    Returns a tuple of ``(start, stop, (first, last))``: node range and packet range
+    (:func:`~layerstack_jax._response.join_interfaces`), consecutive segments with the same
+    reach merged; None when the segment layout is not static (then every node joins every packet).
+    """
+    if beyond is None:
+        return None
+    thick = thick_media(rs.coherent)
+    m = len(thick) - 1  # number of packets
+    shift = 0 if side == "back" else 1  # position in rs.n of entry p of `others`
+    plan: list = []
+    for i, media in enumerate(beyond):
+        cuts = [thick.index(p + shift) for p in media if p + shift in thick and _is_real(rs.n[p + shift])]
+        if side == "back":
+            first = max(cuts, default=0)
+            reach = (first, m)
+        else:
+            reach = (0, min(cuts, default=m))
+        if plan and plan[-1][2] == reach:
+            plan[-1] = (plan[-1][0], (i + 1) * nodes, reach)
+        else:
+            plan.append((i * nodes, (i + 1) * nodes, reach))
+    return tuple(plan)
+
+
+def _is_real(n) -> bool:
+    return is_concrete(n) and bool(np.all(np.imag(np.asarray(n)) == 0))
+
+
+def _node_slice(x, start: int, stop: int):
+    """Nodes ``start:stop`` of a quadrature array: the node axis is the second to last."""
+    return None if x is None else x[..., start:stop, :]
+
+
+def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, plan=None) -> Diffuse:
+    """Hemispherical sums of the joined response (:func:`_reach` ``plan``: which packets each
+    group of nodes sees; those beyond an evanescent thick medium carry no transmittance)."""
+    m = len(interfaces.packets)
+    back = side == "back"
+    if plan is None:
+        plan = ((0, w.shape[0], (0, m)),)
+    r = t = 0.0
+    for start, stop, (first, last) in plan:
+        if (start, stop) == (0, w.shape[0]):
+            sub, ws = interfaces, w
+        else:
+            sub = jax.tree_util.tree_map(lambda x: _node_slice(x, start, stop), interfaces)
+            ws = w[start:stop]
+        out = join_interfaces(rs, sub, both_sides=back, packets=(first, last))
+        R, T = (out.R_back, out.T_back) if back else (out.R_front, out.T_front)
+        r = r + jnp.sum(ws * natural(R), axis=0)
+        if (first == 0) if back else (last == m):  # otherwise T = 0: an evanescent medium is in the way
+            t = t + jnp.sum(ws * natural(T), axis=0)
+    return Diffuse(r, jnp.zeros_like(r) + t)
 
 
 def _diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
-    s, w = _hemisphere(rs, side, nodes)
-    return _diffuse_joined(rs, side, stack_interfaces(rs, s, both_sides=(side == "back")), w)
+    s, w, plan = _hemisphere(rs, side, nodes)
+    return _diffuse_joined(rs, side, stack_interfaces(rs, s, both_sides=(side == "back")), w, plan)
 
 
 def diffuse(stack: Stack, wavelength_nm, side: str = "front", *, nodes: int = DEFAULT_NODES) -> Diffuse:
@@ -254,7 +315,8 @@ class Optics(eqx.Module):
     illumination angle, ``viewing`` at the viewing angle (:class:`Directional`, :class:`BRDF`),
     ``diffuse`` at the back-side hemispherical nodes (over a background) with their ``weights``;
     ``index`` and ``films``: the indices and coherent-film thicknesses they were made with
-    (checked against the stack when both are concrete).
+    (checked against the stack when both are concrete); ``reach`` (static): which packets each
+    group of back-side nodes reaches (:func:`_reach`; None: all of them).
 
     Everything is on the wavelength grid ``(wl,)`` (nm) it was made for: the Fresnel arrays
     carry the geometry's angle axes ``(*angle)`` and, for ``diffuse``, a node axis; the values
@@ -269,6 +331,7 @@ class Optics(eqx.Module):
     index: tuple
     films: tuple
     nodes: int = eqx.field(static=True, default=DEFAULT_NODES)
+    reach: Optional[tuple] = eqx.field(static=True, default=None)
 
 
 def _films(rs: ResolvedStack) -> tuple:
@@ -276,7 +339,7 @@ def _films(rs: ResolvedStack) -> tuple:
 
 
 def _optics_resolved(rs: ResolvedStack, background: bool, geometry: Geometry, nodes: int) -> Optics:
-    incidence = viewing = diffuse = weights = None
+    incidence = viewing = diffuse = weights = reach = None
     if isinstance(geometry, Specular):
         incidence = stack_interfaces(rs, _snell(rs, jnp.deg2rad(geometry.angle_deg)), both_sides=False)
     elif isinstance(geometry, (Sphere, Directional, BRDF)):
@@ -289,11 +352,11 @@ def _optics_resolved(rs: ResolvedStack, background: bool, geometry: Geometry, no
                 )
             viewing = stack_interfaces(rs, _snell(rs, jnp.deg2rad(geometry.viewing_deg)), both_sides=False)
         if background:
-            s, weights = _hemisphere(rs, "back", nodes)
+            s, weights, reach = _hemisphere(rs, "back", nodes)
             diffuse = stack_interfaces(rs, s, both_sides=True)
     else:
         raise LayerstackError(f"unsupported geometry {geometry!r}")
-    return Optics(geometry, incidence, viewing, diffuse, weights, tuple(rs.n), _films(rs), nodes)
+    return Optics(geometry, incidence, viewing, diffuse, weights, tuple(rs.n), _films(rs), nodes, reach)
 
 
 def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES) -> Optics:
@@ -364,7 +427,7 @@ def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int =
     if isinstance(geometry, Specular):
         R, T = natural(front.R_front), natural(front.T_front)
         return {"R": R, "T": T, "A": 1.0 - R - T}[geometry.quantity]
-    d = _diffuse_joined(rs, "back", o.diffuse, o.weights) if background else None
+    d = _diffuse_joined(rs, "back", o.diffuse, o.weights, o.reach) if background else None
     if isinstance(geometry, Sphere):
         total = jnp.zeros_like(natural(front.R_front))
         if background:

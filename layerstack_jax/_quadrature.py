@@ -53,8 +53,10 @@ Smooth cases converge fastest with weak end clustering (dcos-1, asym-1: 1e-13 at
 limiting case is a weakly absorbing thick layer near its own critical angle (the Beer boundary
 layer exp(−αh/cosθ_j) and, for complex n_j, a branch point just off the real axis), which needs
 strong clustering at the segment's top and ~48 nodes with every fixed map tried. DEFAULT_NODES is
-still 24 (dcos-2): 48 would meet 1e-10 but roughly halves the P2 throughput (see the report of
-the quad branch); a τ-adapted traced map per segment (u = cosθ_j, graded in αh) is the open lead.
+therefore 48 (dcos-2), the only rule measured within 1e-10 everywhere. Its cost is contained by
+:func:`evanescent_beyond`: past the critical angle of a thick medium of real index nothing
+behind that medium is reached, so those segments skip its layers' adding rule (see
+``layerstack_jax._geometry._reach``); on the P2 benchmark stack half of the nodes are such.
 """
 
 from __future__ import annotations
@@ -66,11 +68,11 @@ import numpy as np
 
 from ._validate import is_concrete
 
-__all__ = ["DEFAULT_NODES", "unit_rule", "hemispherical_rule", "plain_gauss_legendre_rule"]
+__all__ = ["DEFAULT_NODES", "unit_rule", "hemispherical_rule", "evanescent_beyond", "plain_gauss_legendre_rule"]
 
 #: Default Gauss–Legendre nodes per segment (accuracy measured in tests/test_quadrature.py and
 #: the benchmarks' accuracy-vs-cost table).
-DEFAULT_NODES = 24
+DEFAULT_NODES = 48
 
 #: Interval below its end point over which a zero-width segment spreads its (zero-weight) nodes.
 _EMPTY_SPREAD = 1e-4
@@ -107,23 +109,15 @@ def hemispherical_rule(n_from, n_thick, nodes: int = DEFAULT_NODES):
         ``sum(w * f(mu), axis=0)``).
     """
     x, w = unit_rule(nodes)
-    if is_concrete((n_from, *n_thick)):
-        # Indices known at trace time: drop split points that cannot bind (n_j >= n_from at every
-        # wavelength) and duplicates, so no nodes are spent on empty segments.
-        n_from_np = np.real(np.asarray(n_from))
-        kept = []
-        for n in n_thick:
-            c = np.clip((np.real(np.asarray(n)) / n_from_np) ** 2, 0.0, 1.0)
-            if np.all(c >= 1.0) or any(np.shape(c) == np.shape(k) and np.array_equal(c, k) for k in kept):
-                continue
-            kept.append(c)
-        splits = kept
-        n_from = n_from_np
-    else:
-        n_from = jnp.real(jnp.asarray(n_from))
-        splits = [jnp.clip((jnp.real(jnp.asarray(n)) / n_from) ** 2, 0.0, 1.0) for n in n_thick]
+    splits, order = _binding_splits(n_from, n_thick)
+    n_from = np.real(np.asarray(n_from)) if is_concrete(n_from) else jnp.real(jnp.asarray(n_from))
     shape = jnp.broadcast_shapes(jnp.shape(n_from), *(jnp.shape(c) for c in splits))
-    inner = jnp.sort(jnp.stack([jnp.broadcast_to(c, shape) for c in splits]), axis=0) if splits else jnp.zeros((0, *shape))
+    if not splits:
+        inner = jnp.zeros((0, *shape))
+    elif order is not None:  # already in ascending order at every wavelength
+        inner = jnp.stack([jnp.broadcast_to(jnp.asarray(c), shape) for c in splits])
+    else:
+        inner = jnp.sort(jnp.stack([jnp.broadcast_to(c, shape) for c in splits]), axis=0)
     edges = jnp.concatenate([jnp.zeros((1, *shape)), inner, jnp.ones((1, *shape))])
     lo, hi = edges[:-1], edges[1:]  # (seg, *B)
     width = (hi - lo)[:, None]
@@ -141,6 +135,57 @@ def hemispherical_rule(n_from, n_thick, nodes: int = DEFAULT_NODES):
     mu = jnp.minimum(top - spread * (1.0 - x), top - jnp.abs(top) * jnp.finfo(width.dtype).eps)
     wt = width * w
     return mu.reshape((-1, *shape)), wt.reshape((-1, *shape))
+
+
+def _binding_splits(n_from, n_thick):
+    r"""Split points :math:`\mu_c = (\operatorname{Re} n_j / n_f)^2` clipped to [0, 1], and, when known at
+    trace time, which media they belong to.
+
+    Returns ``(splits, order)``. With concrete indices, split points that cannot bind
+    (:math:`n_j \ge n_f` at every wavelength) are dropped and equal ones merged; if the remaining
+    ones keep one order at every wavelength they come sorted and ``order`` is a tuple, one entry
+    per split point in ascending μ, of the tuple of positions in ``n_thick`` of the media that
+    share it. Otherwise (traced indices, or dispersion curves that cross) ``order`` is None and
+    the caller sorts per wavelength.
+    """
+    if not is_concrete((n_from, *n_thick)):
+        n_from = jnp.real(jnp.asarray(n_from))
+        return [jnp.clip((jnp.real(jnp.asarray(n)) / n_from) ** 2, 0.0, 1.0) for n in n_thick], None
+    n_from_np = np.real(np.asarray(n_from))
+    kept: list = []  # [split point, [positions]]
+    for i, n in enumerate(n_thick):
+        c = np.clip((np.real(np.asarray(n)) / n_from_np) ** 2, 0.0, 1.0)
+        if np.all(c >= 1.0):
+            continue
+        same = [k for k in kept if np.shape(c) == np.shape(k[0]) and np.array_equal(c, k[0])]
+        if same:
+            same[0][1].append(i)
+        else:
+            kept.append([c, [i]])
+    if not kept:
+        return [], ()
+    shape = np.broadcast_shapes(*(np.shape(k[0]) for k in kept))
+    stacked = np.stack([np.broadcast_to(k[0], shape) for k in kept]).reshape(len(kept), -1)
+    rank = np.argsort(stacked, axis=0, kind="stable")
+    if np.all(rank == rank[:, :1]) and np.all(np.diff(stacked[rank[:, 0]], axis=0) >= 0):
+        ordered = [kept[j] for j in rank[:, 0]]
+        return [k[0] for k in ordered], tuple(tuple(k[1]) for k in ordered)
+    return [k[0] for k in kept], None
+
+
+def evanescent_beyond(n_from, n_thick) -> tuple | None:
+    r"""Per segment of :func:`hemispherical_rule` (ascending μ), the positions in ``n_thick`` of
+    the media whose critical angle lies at or below the segment at every wavelength: light from
+    ``n_from`` is evanescent in them over the whole segment. None when this is not known at
+    trace time (traced indices, or split points whose order changes with wavelength)."""
+    _, order = _binding_splits(n_from, n_thick)
+    if order is None:
+        return None
+    out, seen = [()], ()
+    for group in order:
+        seen = seen + tuple(group)
+        out.append(tuple(sorted(seen)))
+    return tuple(out)
 
 
 def plain_gauss_legendre_rule(total_nodes: int):

@@ -57,14 +57,22 @@ def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interf
     return Interfaces(packets, paths)
 
 
-def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True) -> PacketIntensities:
+def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True,
+                    packets: tuple[int, int] | None = None) -> PacketIntensities:
     """Join the packets through the thick layers of ``rs`` (Beer attenuation with the layers'
-    thicknesses and α, then the adding rule, Simonot eqs. 59–60)."""
+    thicknesses and α, then the adding rule, Simonot eqs. 59–60).
+
+    ``packets=(first, last)`` joins only packets ``first … last-1`` (and the thick layers between
+    them): the response of that part of the stack, what light sees when the thick medium above
+    packet ``first`` or below packet ``last-1`` is out of its reach (evanescent)."""
     thick = thick_media(rs.coherent)
-    total = interfaces.packets[0]
-    for a, packet, (cos_real, im_q) in zip(thick[1:-1], interfaces.packets[1:], interfaces.paths):
+    first, last = packets if packets is not None else (0, len(interfaces.packets))
+    total = interfaces.packets[first]
+    for j in range(first, last - 1):
+        a = thick[j + 1]  # the thick layer between packets j and j + 1
+        cos_real, im_q = interfaces.paths[j]
         t = beer_attenuation_along(cos_real, im_q, rs.d[a - 1], rs.alpha[a - 1], rs.wavelength)
-        total = add_layer(total, packet, t)
+        total = add_layer(total, interfaces.packets[j + 1], t)
     if not both_sides:
         total = PacketIntensities(total.R_front, total.T_front, None, None)
     return total

@@ -127,9 +127,11 @@ def _reach(rs: ResolvedStack, side: str, beyond, nodes: int):
     n ≈ 1.5 over a background of n_g ≈ 1.52) half of the back-side nodes never touch the
     thicknesses or α, so a fit or a batch evaluates their adding rule once, not per sample.
 
-    Returns a tuple of ``(start, stop, (first, last))``: node range and packet range
-    (:func:`~layerstack_jax._response.join_interfaces`), consecutive segments with the same
-    reach merged; None when the segment layout is not static (then every node joins every packet).
+    Returns a tuple of ``(start, stop, (first, last), transmits)``: node range, packet range
+    (:func:`~layerstack_jax._response.join_interfaces`) and whether any power can cross the
+    whole stack (False once the far medium or a thick medium on the way is evanescent: then
+    T = 0 exactly and is not computed); consecutive segments alike merged. None when the segment
+    layout is not static (then every node joins every packet).
     """
     if beyond is None:
         return None
@@ -139,15 +141,12 @@ def _reach(rs: ResolvedStack, side: str, beyond, nodes: int):
     plan: list = []
     for i, media in enumerate(beyond):
         cuts = [thick.index(p + shift) for p in media if p + shift in thick and _is_real(rs.n[p + shift])]
-        if side == "back":
-            first = max(cuts, default=0)
-            reach = (first, m)
+        reach = (max(cuts, default=0), m) if side == "back" else (0, min(cuts, default=m))
+        key = (reach, not cuts)
+        if plan and plan[-1][2:] == key:
+            plan[-1] = (plan[-1][0], (i + 1) * nodes, *key)
         else:
-            reach = (0, min(cuts, default=m))
-        if plan and plan[-1][2] == reach:
-            plan[-1] = (plan[-1][0], (i + 1) * nodes, reach)
-        else:
-            plan.append((i * nodes, (i + 1) * nodes, reach))
+            plan.append((i * nodes, (i + 1) * nodes, *key))
     return tuple(plan)
 
 
@@ -166,18 +165,18 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
     m = len(interfaces.packets)
     back = side == "back"
     if plan is None:
-        plan = ((0, w.shape[0], (0, m)),)
+        plan = ((0, w.shape[0], (0, m), True),)
     r = t = 0.0
-    for start, stop, (first, last) in plan:
+    for start, stop, packets, transmits in plan:
         if (start, stop) == (0, w.shape[0]):
             sub, ws = interfaces, w
         else:
             sub = jax.tree_util.tree_map(lambda x: _node_slice(x, start, stop), interfaces)
             ws = w[start:stop]
-        out = join_interfaces(rs, sub, both_sides=back, packets=(first, last))
+        out = join_interfaces(rs, sub, both_sides=back, packets=packets)
         R, T = (out.R_back, out.T_back) if back else (out.R_front, out.T_front)
         r = r + jnp.sum(ws * natural(R), axis=0)
-        if (first == 0) if back else (last == m):  # otherwise T = 0: an evanescent medium is in the way
+        if transmits:  # otherwise T = 0 exactly: an evanescent medium is in the way
             t = t + jnp.sum(ws * natural(T), axis=0)
     return Diffuse(r, jnp.zeros_like(r) + t)
 

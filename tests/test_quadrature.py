@@ -344,11 +344,12 @@ def test_segments_beyond_an_evanescent_thick_medium_skip_the_layers_behind_it():
     wl = jnp.array([450.0, 650.0])
     N = 16
     # P2-like: 1.0 | 1.5, 1.6, 1.45 (α) | background 1.52, seen from the background. Split points
-    # (from 1.52): air 0.43, 1.45 → 0.91, 1.5 → 0.97. Beyond 0.91 only the 1.52|1.45 interface.
+    # (from 1.52): air 0.43 (no T beyond), 1.45 → 0.91, 1.5 → 0.97 (beyond 0.91: only the 1.52|1.45
+    # interface).
     p2 = ls.Stack(1.0, [ls.Layer(n, h, coherent=False, alpha=a) for n, h, a in
                         ((1.5, 2e4, 2e-5), (1.6, 1e4, 3e-5), (1.45, 5e3, 1e-5))], ls.Substrate(1.52))
     full, pruned, plan = _full_and_pruned(p2, wl, "back", N)
-    assert plan == ((0, 2 * N, (0, 4)), (2 * N, 4 * N, (3, 4)))
+    assert plan == ((0, N, (0, 4), True), (N, 2 * N, (0, 4), False), (2 * N, 4 * N, (3, 4), False))
     assert max_abs(full.r, pruned.r) <= 1e-15 and max_abs(full.t, pruned.t) <= 1e-15
     # mixed stacks, films around the cut medium, both sides
     mixed_back = build_stack([1.0, 1.5, 1.3, 1.45, 2.0, 1.6], [INF, 2e4, 100.0, 8e3, 50.0, INF],
@@ -357,8 +358,9 @@ def test_segments_beyond_an_evanescent_thick_medium_skip_the_layers_behind_it():
                               [True, False, False], [None, 3e-5, 1e-5])
     # back, from 1.6: air 0.39, film 1.3 0.66 (a film cuts nothing), 1.45 0.82, 1.5 0.88
     # front, from 1.7: exit 1.2 0.50 (no cut: nothing behind it), 1.4 0.68, 1.5 0.78
-    for st, side, expected in ((mixed_back, "back", ((0, 3 * N, (0, 3)), (3 * N, 5 * N, (2, 3)))),
-                               (mixed_front, "front", ((0, 2 * N, (0, 3)), (2 * N, 4 * N, (0, 1))))):
+    back = ((0, N, (0, 3), True), (N, 3 * N, (0, 3), False), (3 * N, 5 * N, (2, 3), False))
+    front = ((0, N, (0, 3), True), (N, 2 * N, (0, 3), False), (2 * N, 4 * N, (0, 1), False))
+    for st, side, expected in ((mixed_back, "back", back), (mixed_front, "front", front)):
         full, pruned, plan = _full_and_pruned(st, wl, side, N)
         assert plan == expected, plan
         assert max_abs(full.r, pruned.r) <= 1e-15 and max_abs(full.t, pruned.t) <= 1e-15
@@ -370,11 +372,11 @@ def test_no_pruning_behind_an_absorbing_medium_or_under_jit():
     no segment is cut there; with traced indices the layout is not static: no plan at all."""
     from layerstack_jax import _geometry as G
 
-    # from 1.6: air 0.39, 1.4 + 1e-4i 0.77 (no cut), 1.5 0.88 (cut: only the 1.6|1.4 interface
-    # and the 1.4 layer before the 1.4|1.5 one remain)
+    # from 1.6: air 0.39 (no T beyond), 1.4 + 1e-4i 0.77 (no cut), 1.5 0.88 (cut: only the
+    # 1.6|1.4 interface and the 1.4 layer before the 1.4|1.5 one remain)
     st = build_stack([1.0, 1.5, 1.4 + 1e-4j, 1.6], [INF, 1e4, 1e4, INF], [False, False])
     full, pruned, plan = _full_and_pruned(st, jnp.array([550.0]), "back", 16)
-    assert plan == ((0, 48, (0, 3)), (48, 64, (1, 3))), plan
+    assert plan == ((0, 16, (0, 3), True), (16, 48, (0, 3), False), (48, 64, (1, 3), False)), plan
     assert max_abs(full.r, pruned.r) <= 1e-15 and max_abs(full.t, pruned.t) <= 1e-15
     plans = []
 

@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._adding_sums import hemispherical_adding_sums
+from ._incoherent import beer_attenuation_along
 from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
 from ._response import Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
@@ -163,6 +165,7 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
     """Hemispherical sums of the joined response (:func:`_reach` ``plan``: which packets each
     group of nodes sees; those beyond an evanescent thick medium carry no transmittance)."""
     m = len(interfaces.packets)
+    thick = thick_media(rs.coherent)
     back = side == "back"
     if plan is None:
         plan = ((0, w.shape[0], (0, m), True),)
@@ -173,11 +176,16 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
         else:
             sub = jax.tree_util.tree_map(lambda x: _node_slice(x, start, stop), interfaces)
             ws = w[start:stop]
-        out = join_interfaces(rs, sub, both_sides=back, packets=packets)
-        R, T = (out.R_back, out.T_back) if back else (out.R_front, out.T_front)
-        r = r + jnp.sum(ws * natural(R), axis=0)
-        if transmits:  # otherwise T = 0 exactly: an evanescent medium is in the way
-            t = t + jnp.sum(ws * natural(T), axis=0)
+        first, last = packets
+        # Beer factors of the thick layers between the packets (thick[j + 1] lies between
+        # packets j and j + 1); thicknesses and α enter only here
+        ts = tuple(
+            beer_attenuation_along(*sub.paths[j], rs.d[thick[j + 1] - 1], rs.alpha[thick[j + 1] - 1], rs.wavelength)
+            for j in range(first, last - 1)
+        )
+        # transmits=False: T = 0 exactly (an evanescent medium is in the way), not computed
+        r_part, t_part = hemispherical_adding_sums(tuple(sub.packets[first:last]), ts, ws, back, transmits)
+        r, t = r + r_part, t + t_part
     return Diffuse(r, jnp.zeros_like(r) + t)
 
 

@@ -20,9 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._adding_sums import hemispherical_adding_sums
-from ._incoherent import beer_attenuation_along
 from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
-from ._response import Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities, thick_media
+from ._response import (Interfaces, beer_factors, join_interfaces, natural, stack_interfaces, stack_intensities,
+                        thick_media)
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
@@ -130,7 +130,7 @@ def _reach(rs: ResolvedStack, side: str, beyond, nodes: int):
     thicknesses or α, so a fit or a batch evaluates their adding rule once, not per sample.
 
     Returns a tuple of ``(start, stop, (first, last), transmits)``: node range, packet range
-    (:func:`~layerstack_jax._response.join_interfaces`) and whether any power can cross the
+    (packets ``first … last-1`` and the thick layers between them) and whether any power can cross the
     whole stack (False once the far medium or a thick medium on the way is evanescent: then
     T = 0 exactly and is not computed); consecutive segments alike merged. None when the segment
     layout is not static (then every node joins every packet).
@@ -165,7 +165,6 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
     """Hemispherical sums of the joined response (:func:`_reach` ``plan``: which packets each
     group of nodes sees; those beyond an evanescent thick medium carry no transmittance)."""
     m = len(interfaces.packets)
-    thick = thick_media(rs.coherent)
     back = side == "back"
     if plan is None:
         plan = ((0, w.shape[0], (0, m), True),)
@@ -177,12 +176,7 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
             sub = jax.tree_util.tree_map(lambda x: _node_slice(x, start, stop), interfaces)
             ws = w[start:stop]
         first, last = packets
-        # Beer factors of the thick layers between the packets (thick[j + 1] lies between
-        # packets j and j + 1); thicknesses and α enter only here
-        ts = tuple(
-            beer_attenuation_along(*sub.paths[j], rs.d[thick[j + 1] - 1], rs.alpha[thick[j + 1] - 1], rs.wavelength)
-            for j in range(first, last - 1)
-        )
+        ts = beer_factors(rs, sub.paths, first, last)
         # transmits=False: T = 0 exactly (an evanescent medium is in the way), not computed
         r_part, t_part = hemispherical_adding_sums(tuple(sub.packets[first:last]), ts, ws, back, transmits)
         r, t = r + r_part, t + t_part

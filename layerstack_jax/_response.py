@@ -20,7 +20,7 @@ from ._fresnel import normal_wavevector
 from ._incoherent import add_layer, beer_attenuation_along, slant_path
 from ._stack import ResolvedStack
 
-__all__ = ["thick_media", "Interfaces", "stack_interfaces", "join_interfaces", "stack_intensities", "natural"]
+__all__ = ["thick_media", "Interfaces", "stack_interfaces", "beer_factors", "join_interfaces", "stack_intensities", "natural"]
 
 
 def thick_media(coherent: tuple) -> list[int]:
@@ -57,22 +57,24 @@ def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interf
     return Interfaces(packets, paths)
 
 
-def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True,
-                    packets: tuple[int, int] | None = None) -> PacketIntensities:
-    """Join the packets through the thick layers of ``rs`` (Beer attenuation with the layers'
-    thicknesses and α, then the adding rule, Simonot eqs. 59–60).
-
-    ``packets=(first, last)`` joins only packets ``first … last-1`` (and the thick layers between
-    them): the response of that part of the stack, what light sees when the thick medium above
-    packet ``first`` or below packet ``last-1`` is out of its reach (evanescent)."""
+def beer_factors(rs: ResolvedStack, paths: tuple, first: int = 0, last: int | None = None) -> tuple:
+    """Single-pass attenuations :math:`t` of the thick layers between packets ``first … last-1``
+    (all of them by default), from their slant ``paths`` (:class:`Interfaces`): the only place
+    where thick-layer thicknesses and α enter the response."""
     thick = thick_media(rs.coherent)
-    first, last = packets if packets is not None else (0, len(interfaces.packets))
-    total = interfaces.packets[first]
-    for j in range(first, last - 1):
-        a = thick[j + 1]  # the thick layer between packets j and j + 1
-        cos_real, im_q = interfaces.paths[j]
-        t = beer_attenuation_along(cos_real, im_q, rs.d[a - 1], rs.alpha[a - 1], rs.wavelength)
-        total = add_layer(total, interfaces.packets[j + 1], t)
+    last = len(paths) + 1 if last is None else last
+    return tuple(
+        beer_attenuation_along(*paths[j], rs.d[thick[j + 1] - 1], rs.alpha[thick[j + 1] - 1], rs.wavelength)
+        for j in range(first, last - 1)  # thick[j + 1] lies between packets j and j + 1
+    )
+
+
+def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True) -> PacketIntensities:
+    """Join the packets through the thick layers of ``rs`` (Beer attenuation with the layers'
+    thicknesses and α, then the adding rule, Simonot eqs. 59–60)."""
+    total = interfaces.packets[0]
+    for t, packet in zip(beer_factors(rs, interfaces.paths), interfaces.packets[1:]):
+        total = add_layer(total, packet, t)
     if not both_sides:
         total = PacketIntensities(total.R_front, total.T_front, None, None)
     return total

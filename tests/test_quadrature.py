@@ -168,7 +168,8 @@ def _errors(nodes, patterns=tuple(PATTERNS), per_pattern=PER_PATTERN, seed=2718)
     where = None
     for p, cases in _random_cases(seed, per_pattern, patterns).items():
         stack, wl = _wl_batched_stack(cases)
-        out = {side: ls.diffuse(stack, wl, side, nodes=nodes) for side in ("front", "back")}
+        # one compiled call per pattern (stack closed over: indices concrete, layout static)
+        out = jax.jit(lambda: {side: ls.diffuse(stack, wl, side, nodes=nodes) for side in ("front", "back")})()
         # Lambertian reciprocity (étendue): n0² t_front = n_exit² t_back, also for absorbing stacks
         n0 = np.array([c[0][0].real for c in cases])
         ne = np.array([c[0][-1].real for c in cases])
@@ -329,12 +330,20 @@ def test_jit_and_eager_quadrature_layouts_agree():
 # segments beyond an evanescent thick medium (geometry._reach)
 # ----------------------------------------------------------------------------------------------
 def _full_and_pruned(st, wl, side, nodes=16):
+    """Diffuse (r, t) joined over every packet at every node, and as pruned by the plan; the plan.
+    Under jit with the stack closed over: its indices stay concrete, so the plan is static."""
     from layerstack_jax import _geometry as G
 
-    rs = G.resolve(st, wl)
-    s, w, plan = G._hemisphere(rs, side, nodes)
-    interfaces = G.stack_interfaces(rs, s, both_sides=(side == "back"))
-    return G._diffuse_joined(rs, side, interfaces, w, None), G._diffuse_joined(rs, side, interfaces, w, plan), plan
+    plan = G._hemisphere(G.resolve(st, wl), side, nodes)[2]
+
+    @jax.jit
+    def both():
+        rs = G.resolve(st, wl)
+        s, w, _ = G._hemisphere(rs, side, nodes)
+        interfaces = G.stack_interfaces(rs, s, both_sides=(side == "back"))
+        return G._diffuse_joined(rs, side, interfaces, w, None), G._diffuse_joined(rs, side, interfaces, w, plan)
+
+    return *both(), plan
 
 
 def test_segments_beyond_an_evanescent_thick_medium_skip_the_layers_behind_it():

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
 from ._coherent import PacketIntensities
-from ._incoherent import add_layer
+from ._incoherent import add_layer, safe_reciprocal
 
 __all__ = ["hemispherical_adding_sums"]
 
@@ -48,27 +48,27 @@ def _natural_sum(w, x):
     return jnp.sum(w * 0.5 * (x[0] + x[1]), axis=0)
 
 
-def _outputs(total: PacketIntensities, back: bool):
-    return (total.R_back, total.T_back) if back else (total.R_front, total.T_front)
+def _composites_above(packets, ts) -> list:
+    """[packet 0, packets 0..1 joined, …, the whole stack]: the running adding rule."""
+    above = [packets[0]]
+    for t, packet in zip(ts, packets[1:]):
+        above.append(add_layer(above[-1], packet, t))
+    return above
+
+
+def _sums(total: PacketIntensities, w, back: bool, transmits: bool):
+    R, T = (total.R_back, total.T_back) if back else (total.R_front, total.T_front)
+    r = _natural_sum(w, R)
+    return r, (_natural_sum(w, T) if transmits else jnp.zeros_like(r))
 
 
 def _plain(packets, ts, w, back: bool, transmits: bool):
-    total = packets[0]
-    for t, packet in zip(ts, packets[1:]):
-        total = add_layer(total, packet, t)
-    R, T = _outputs(total, back)
-    r = _natural_sum(w, R)
-    return r, (_natural_sum(w, T) if transmits else jnp.zeros_like(r))
+    return _sums(_composites_above(packets, ts)[-1], w, back, transmits)
 
 
 def _is_zero(tangent) -> bool:
     return all(isinstance(x, SymbolicZero) for x in jax.tree_util.tree_leaves(
         tangent, is_leaf=lambda x: isinstance(x, SymbolicZero)))
-
-
-def _safe_inverse(den):
-    ok = den != 0
-    return jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4))
@@ -88,11 +88,6 @@ def hemispherical_adding_sums(packets, ts, w, back: bool, transmits: bool):
     return _plain(packets, ts, w, back, transmits)
 
 
-hemispherical_adding_sums.defjvp(
-    lambda back, transmits, primals, tangents: _jvp(back, transmits, primals, tangents), symbolic_zeros=True
-)
-
-
 def _jvp(back, transmits, primals, tangents):
     packets, ts, w = primals
     d_packets, d_ts, d_w = tangents
@@ -104,13 +99,9 @@ def _jvp(back, transmits, primals, tangents):
         )
         return jax.jvp(lambda p, t, ww: _plain(p, t, ww, back, transmits), (packets, ts, w), (d_packets, d_ts, d_w))
     L = len(ts)
-    above = [packets[0]]  # above[j]: composite of packets 0..j (the forward pass)
-    for j in range(L):
-        above.append(add_layer(above[-1], packets[j + 1], ts[j]))
-    R, T = _outputs(above[-1], back)
-    r = _natural_sum(w, R)
-    t_out = _natural_sum(w, T) if transmits else jnp.zeros_like(r)
-    below = [None] * (L + 1)  # below[j]: composite of packets j..L
+    above = _composites_above(packets, ts)  # above[j]: packets 0..j joined
+    r, t_out = _sums(above[-1], w, back, transmits)
+    below = [None] * (L + 1)  # below[j]: packets j..L joined
     below[L] = packets[L]
     for j in range(L - 1, 0, -1):
         below[j] = add_layer(packets[j], below[j + 1], ts[j])
@@ -120,16 +111,18 @@ def _jvp(back, transmits, primals, tangents):
         if isinstance(d_ts[j], SymbolicZero):
             continue
         a, b, t = above[j], below[j + 1], ts[j]
-        t2 = t * t
-        g = a.R_back * b.R_front * t2
-        inv2 = _safe_inverse(1.0 - g) ** 2
+        g = a.R_back * b.R_front * t * t
+        inv2 = safe_reciprocal(1.0 - g) ** 2
         if back:
             dR = 2.0 * t * b.T_back * b.T_front * a.R_back * inv2
             dT = b.T_back * a.T_back * (1.0 + g) * inv2
         else:
             dR = 2.0 * t * a.T_front * a.T_back * b.R_front * inv2
             dT = a.T_front * b.T_front * (1.0 + g) * inv2
-        dr = dr + jnp.sum(w * 0.5 * (dR[0] + dR[1]) * d_ts[j], axis=0)
+        dr = dr + _natural_sum(w * d_ts[j], dR)
         if transmits:
-            dt = dt + jnp.sum(w * 0.5 * (dT[0] + dT[1]) * d_ts[j], axis=0)
+            dt = dt + _natural_sum(w * d_ts[j], dT)
     return (r, t_out), (dr, dt)
+
+
+hemispherical_adding_sums.defjvp(_jvp, symbolic_zeros=True)

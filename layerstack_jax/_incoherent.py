@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
 
-__all__ = ["slant_path", "beer_attenuation_along", "beer_attenuation", "add_layer"]
+__all__ = ["slant_path", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
 
 
 def slant_path(n, q):
@@ -68,6 +68,12 @@ def beer_attenuation(n, q, thickness, alpha, wavelength):
     return beer_attenuation_along(*slant_path(n, q), thickness, alpha, wavelength)
 
 
+def safe_reciprocal(den):
+    """1/den, and 0 where den == 0 (with a finite gradient: the double-where guard)."""
+    ok = den != 0
+    return jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
+
+
 def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIntensities:
     """Compose two interfaces around a thick layer of single-pass attenuation ``t``.
 
@@ -82,8 +88,7 @@ def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIn
     # den -> 0 only for a lossless cavity between two perfect mirrors (R = 1 on both sides with
     # t = 1), where no light enters: the numerators vanish as well. (`!= 0` rather than `> 0`
     # so that the same rule serves complex s–p correlations, :mod:`layerstack_jax._polarimetry`.)
-    ok = den != 0
-    inv = jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
+    inv = safe_reciprocal(den)
     R_f = above.R_front + above.T_front * above.T_back * below.R_front * t2 * inv
     T_f = above.T_front * below.T_front * t * inv
     R_b = below.R_back + below.T_back * below.T_front * above.R_back * t2 * inv

@@ -1,4 +1,4 @@
-r"""Hemispherical sums of the adding rule, with a derivative that costs one extra sweep.
+r"""Hemispherical sums of the adding rule, with a closed-form derivative (one adjoint sweep).
 
 A diffuse reflectance or transmittance of a stack of thick layers is a weighted sum over
 quadrature nodes of the per-node adding rule (Simonot et al. eqs. 59–63 under the Lambertian
@@ -7,26 +7,51 @@ integral of eqs. 47, 49):
 .. math::
     r = \sum_i w_i \tfrac12\sum_{s,p} R(\mu_i; t_1 \dots t_L),
 
-where the thick layers' thicknesses and absorption enter only through their single-pass Beer
-factors :math:`t_j(\mu_i)`. A fit or a design differentiates r with respect to those
-thicknesses, α(λ) and ρg; generic automatic differentiation carries one tangent per parameter
-through every layer of the chain (forward mode) or stores the whole chain per node (reverse mode,
-measured 10–16× the forward on the P2 benchmark). Here the derivative is written out instead.
-With :math:`A_{j}` the composite of everything above layer *j* and :math:`B_{j}` everything
-below it, the total is ``add_layer(A_j, B_j, t_j)`` and (back side; the front side mirrors it)
+where the thick layers' thicknesses :math:`h_j` and absorption coefficients :math:`\alpha_j`
+enter only through their single-pass Beer factors (eqs. 23, 56, 61)
 
 .. math::
-    \frac{\partial R_b}{\partial t_j} = \frac{2 t_j\, T^B_b T^B_f R^A_b}{D_j^2}, \qquad
-    \frac{\partial T_b}{\partial t_j} = \frac{T^B_b T^A_b\,(1 + R^A_b R^B_f t_j^2)}{D_j^2}, \qquad
-    D_j = 1 - R^A_b R^B_f t_j^2 .
+    t_j = e^{-\kappa_j h_j},\qquad
+    \kappa_j = \frac{4\pi}{\lambda}\operatorname{Im} q_j + \frac{\alpha_j}{\operatorname{Re}\cos\theta_j}.
 
-The :math:`A_j` are the running composition of the forward pass, the :math:`B_j` one more
-sweep from the far side; the weighted, polarization-averaged sensitivities
-:math:`k_j = w\,\tfrac12\sum_{s,p}\partial R/\partial t_j` are computed once, and each tangent
-(or cotangent) then costs one multiply-and-sum per layer: forward-mode Jacobians and
-reverse-mode gradients both cost about the same few forward passes, whatever the number of
-parameters. When the interfaces or the weights themselves carry tangents (fitting an index or
-a coherent film), the generic derivative is used.
+**One-sided sweep.** A diffuse sum needs the response to light from one side only. Seen from
+that side, the stack is built from the far end towards the light: with :math:`(R, T)` the
+composite of what is already built (its reflectance towards the light and the transmittance
+from the light's side through it) and a packet P added in front of it through a thick layer of
+attenuation t (Simonot eqs. 51, 53 and their mirror images; :func:`~layerstack_jax._incoherent.add_layer`
+restricted to the side that is needed),
+
+.. math::
+    D = 1 - R\,R^P_\text{far}\,t^2,\qquad
+    R \leftarrow R^P_\text{near} + \frac{T^P_\text{in} T^P_\text{out}\, t^2\, R}{D},\qquad
+    T \leftarrow \frac{T^P_\text{in}\, T\, t}{D},
+
+where "near" / "in" refer to light arriving on P from the light's side.
+
+**Derivative.** A fit or a design differentiates r and t with respect to :math:`h_j`,
+:math:`\alpha_j(\lambda)` (and ρg, which does not enter here). Generic automatic differentiation
+carries one tangent per parameter through every step (forward mode), or stores the whole chain
+per node (reverse mode). Here the derivative of one step is written out,
+
+.. math::
+    \frac{\partial R'}{\partial R} = \frac{T^P_\text{in}T^P_\text{out}t^2}{D^2},\quad
+    \frac{\partial R'}{\partial t} = \frac{2t\,T^P_\text{in}T^P_\text{out}R}{D^2},\quad
+    \frac{\partial T'}{\partial T} = \frac{T^P_\text{in}t}{D},\quad
+    \frac{\partial T'}{\partial R} = \frac{T'\,R^P_\text{far}t^2}{D},\quad
+    \frac{\partial T'}{\partial t} = \frac{T^P_\text{in}T\,(1 + R\,R^P_\text{far}t^2)}{D^2},
+
+and the adjoints :math:`\partial R_\text{total}/\partial R`, :math:`\partial T_\text{total}/\partial(R, T)`
+run back through the stored steps: multiplications only, no new division. The weighted,
+polarization-averaged sensitivities
+
+.. math::
+    S^h_j = -\sum_i w_i\,\tfrac12\sum_{s,p}\frac{\partial R}{\partial t_j}\,t_j\,\kappa_j, \qquad
+    S^\alpha_j = -\sum_i w_i\,\tfrac12\sum_{s,p}\frac{\partial R}{\partial t_j}\,t_j\,\frac{h_j}{\operatorname{Re}\cos\theta_j}
+
+(and the same for T) are reduced over the nodes once per evaluation; each tangent (forward
+mode) or cotangent (reverse mode) then costs a multiply per wavelength. When an index, a
+coherent film, the quadrature weights or the wavelength carry a tangent (fitting an index or a
+film), the generic derivative of the same sweep is used.
 """
 
 from __future__ import annotations
@@ -37,10 +62,9 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
-from ._coherent import PacketIntensities
-from ._incoherent import add_layer, safe_reciprocal
+from ._incoherent import beer_attenuation_along, beer_rates, safe_reciprocal
 
-__all__ = ["hemispherical_adding_sums"]
+__all__ = ["hemispherical_sums"]
 
 
 def _natural_sum(w, x):
@@ -48,22 +72,67 @@ def _natural_sum(w, x):
     return jnp.sum(w * 0.5 * (x[0] + x[1]), axis=0)
 
 
-def _composites_above(packets, ts) -> list:
-    """[packet 0, packets 0..1 joined, …, the whole stack]: the running adding rule."""
-    above = [packets[0]]
-    for t, packet in zip(ts, packets[1:]):
-        above.append(add_layer(above[-1], packet, t))
-    return above
+def _seen_from_light(packets, back: bool):
+    """Packets ordered from the far end towards the light, as ``(R_near, R_far, T_in, T_out)``:
+    reflectance for light arriving from the light's side, from the other side, and the
+    transmittances towards and back from the far end. Returns the order of the thick layers too
+    (index of the layer crossed by each step)."""
+    if back:  # light from the last medium: build from packet 0 downwards
+        seen = [(p.R_back, p.R_front, p.T_back, p.T_front) for p in packets]
+        return seen, list(range(len(packets) - 1))
+    seen = [(p.R_front, p.R_back, p.T_front, p.T_back) for p in reversed(packets)]
+    return seen, list(range(len(packets) - 2, -1, -1))
 
 
-def _sums(total: PacketIntensities, w, back: bool, transmits: bool):
-    R, T = (total.R_back, total.T_back) if back else (total.R_front, total.T_front)
+def _sweep(packets, ts, back: bool, transmits: bool):
+    """One-sided adding rule (module docstring). Returns the final ``(R, T)`` and the per-step
+    record ``(R_before, T_before, T_after, 1/D, t, packet)`` for the adjoint sweep."""
+    seen, order = _seen_from_light(packets, back)
+    R, _, T, _ = seen[0]
+    T = T if transmits else None
+    steps = []
+    for (R_near, R_far, T_in, T_out), j in zip(seen[1:], order):
+        t = ts[j]
+        t2 = t * t
+        inv = safe_reciprocal(1.0 - R * R_far * t2)
+        R_new = R_near + T_in * T_out * t2 * R * inv
+        T_new = T_in * T * t * inv if transmits else None
+        steps.append((R, T, T_new, inv, t, (R_far, T_in, T_out), j))
+        R, T = R_new, T_new
+    return (R, T), steps
+
+
+def _beer(paths, thickness, alpha, wavelength):
+    return tuple(beer_attenuation_along(*p, h, a, wavelength) for p, h, a in zip(paths, thickness, alpha))
+
+
+def _plain(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
+    (R, T), _ = _sweep(packets, _beer(paths, thickness, alpha, wavelength), back, transmits)
     r = _natural_sum(w, R)
     return r, (_natural_sum(w, T) if transmits else jnp.zeros_like(r))
 
 
-def _plain(packets, ts, w, back: bool, transmits: bool):
-    return _sums(_composites_above(packets, ts)[-1], w, back, transmits)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(6, 7))
+def hemispherical_sums(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
+    """``(r, t)``: Lambertian sums ``Σ w · natural(R)``, ``Σ w · natural(T)`` of the packets
+    joined through the thick layers between them (one-sided sweep of the module docstring).
+
+    Args:
+        packets: L + 1 :class:`~layerstack_jax._coherent.PacketIntensities`, fields ``(2, node, wl)``
+            (or broadcastable, e.g. ``(2, node, 1)`` for dispersionless indices).
+        paths: L slant paths ``(Re cos θ, Im q)`` of the thick layers between them, ``(node, wl)``
+            (:func:`~layerstack_jax._incoherent.slant_path`).
+        thickness: L thicknesses in nm, scalars or ``(wl,)``.
+        alpha: L absorption coefficients in 1/nm (``(wl,)``, scalar or None).
+        wavelength: ``(wl,)`` vacuum wavelengths in nm.
+        w: quadrature weights ``(node, wl)`` (or ``(node, 1)``).
+        back: light from the last medium (sums of ``R_back, T_back``) instead of the first.
+        transmits: False when T is known to be zero (an evanescent medium on the way): not computed.
+
+    Returns ``(r, t)`` shaped ``(wl,)``, dimensionless; the derivative with respect to
+    thicknesses and α is the module's closed form.
+    """
+    return _plain(packets, paths, thickness, alpha, wavelength, w, back, transmits)
 
 
 def _is_zero(tangent) -> bool:
@@ -71,58 +140,67 @@ def _is_zero(tangent) -> bool:
         tangent, is_leaf=lambda x: isinstance(x, SymbolicZero)))
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4))
-def hemispherical_adding_sums(packets, ts, w, back: bool, transmits: bool):
-    """``(r, t)``: Lambertian sums ``Σ w · natural(R)``, ``Σ w · natural(T)`` of the packets
-    joined through thick layers of single-pass attenuation ``ts`` (one per gap between packets).
+def _instantiate(primal, tangent):
+    return jnp.zeros_like(primal) if isinstance(tangent, SymbolicZero) else tangent
 
-    Args:
-        packets: :class:`PacketIntensities`, fields ``(2, node, wl)`` (or broadcastable).
-        ts: Beer factors, one ``(node, wl)`` array per thick layer between the packets.
-        w: quadrature weights ``(node, wl)``.
-        back: sums of ``R_back, T_back`` (light from the last medium) instead of the front ones.
-        transmits: False when T is known to be zero (an evanescent medium on the way): not computed.
 
-    Returns ``(r, t)`` shaped ``(wl,)``; the derivative is the module's closed form.
-    """
-    return _plain(packets, ts, w, back, transmits)
+def _adjoint_derivatives(steps, transmits: bool):
+    """∂R_total/∂t_j and ∂T_total/∂t_j (per node and polarization) by the adjoint sweep of the
+    module docstring. Returns ``{j: (dR, dT or None)}``."""
+    out = {}
+    g = 1.0  # ∂R_total/∂R after the step
+    lam_T, lam_R = 1.0, 0.0  # ∂T_total/∂T, ∂T_total/∂R after the step
+    for R, T, T_new, inv, t, (R_far, T_in, T_out), j in reversed(steps):
+        inv2 = inv * inv
+        a = T_in * T_out * inv2  # ∂R'/∂R = a t², ∂R'/∂t = 2 a t R
+        dR_dt = 2.0 * t * R * a
+        dR = g * dR_dt
+        dT = None
+        if transmits:
+            c = R_far * t * t
+            dT_dt = T_in * T * (1.0 + R * c) * inv2
+            dT = lam_T * dT_dt + lam_R * dR_dt
+            lam_T, lam_R = lam_T * T_in * t * inv, lam_T * T_new * c * inv + lam_R * a * t * t
+        g = g * a * t * t
+        out[j] = (dR, dT)
+    return out
 
 
 def _jvp(back, transmits, primals, tangents):
-    packets, ts, w = primals
-    d_packets, d_ts, d_w = tangents
-    if not (_is_zero(d_packets) and _is_zero(d_w)):
-        # an index or a coherent film is being differentiated: generic derivative
-        instantiate = lambda p, d: jnp.zeros_like(p) if isinstance(d, SymbolicZero) else d  # noqa: E731
-        d_packets, d_ts, d_w = jax.tree_util.tree_map(
-            instantiate, (packets, ts, w), (d_packets, d_ts, d_w), is_leaf=lambda x: isinstance(x, SymbolicZero)
-        )
-        return jax.jvp(lambda p, t, ww: _plain(p, t, ww, back, transmits), (packets, ts, w), (d_packets, d_ts, d_w))
-    L = len(ts)
-    above = _composites_above(packets, ts)  # above[j]: packets 0..j joined
-    r, t_out = _sums(above[-1], w, back, transmits)
-    below = [None] * (L + 1)  # below[j]: packets j..L joined
-    below[L] = packets[L]
-    for j in range(L - 1, 0, -1):
-        below[j] = add_layer(packets[j], below[j + 1], ts[j])
-    dr = jnp.zeros_like(r)
-    dt = jnp.zeros_like(r)
-    for j in range(L):
-        if isinstance(d_ts[j], SymbolicZero):
-            continue
-        a, b, t = above[j], below[j + 1], ts[j]
-        g = a.R_back * b.R_front * t * t
-        inv2 = safe_reciprocal(1.0 - g) ** 2
-        if back:
-            dR = 2.0 * t * b.T_back * b.T_front * a.R_back * inv2
-            dT = b.T_back * a.T_back * (1.0 + g) * inv2
-        else:
-            dR = 2.0 * t * a.T_front * a.T_back * b.R_front * inv2
-            dT = a.T_front * b.T_front * (1.0 + g) * inv2
-        dr = dr + _natural_sum(w * d_ts[j], dR)
-        if transmits:
-            dt = dt + _natural_sum(w * d_ts[j], dT)
-    return (r, t_out), (dr, dt)
+    packets, paths, thickness, alpha, wavelength, w = primals
+    d_packets, d_paths, d_thickness, d_alpha, d_wavelength, d_w = tangents
+    if not all(_is_zero(x) for x in (d_packets, d_paths, d_wavelength, d_w)):
+        # an index, a coherent film, the split points or the grid is differentiated: generic path
+        d_all = jax.tree_util.tree_map(_instantiate, primals, tangents[:6],
+                                       is_leaf=lambda x: isinstance(x, SymbolicZero))
+        return jax.jvp(lambda *p: _plain(*p, back, transmits), primals, tuple(d_all))
+    ts = _beer(paths, thickness, alpha, wavelength)
+    (R, T), steps = _sweep(packets, ts, back, transmits)
+    r = _natural_sum(w, R)
+    t_sum = _natural_sum(w, T) if transmits else jnp.zeros_like(r)
+    dr, dt = jnp.zeros_like(r), jnp.zeros_like(r)
+    wanted = [j for j in range(len(ts)) if not (_is_zero(d_thickness[j]) and _is_zero(d_alpha[j]))]
+    if not wanted:
+        return (r, t_sum), (dr, dt)
+    derivatives = _adjoint_derivatives(steps, transmits)
+    for j in wanted:
+        dR, dT = derivatives[j]
+        kappa, inv_cos = beer_rates(*paths[j], alpha[j], wavelength)
+        weight = -w * ts[j]  # w · ∂t/∂(κh)
+        for d_x, rate in ((d_thickness[j], kappa), (d_alpha[j], inv_cos * thickness[j])):
+            if _is_zero(d_x):
+                continue
+            terms = [(dR, "r")] + ([(dT, "t")] if transmits else [])
+            for dX, which in terms:
+                if jnp.ndim(d_x) <= 1:  # no node axis: reduce over the nodes once, then scale
+                    change = _natural_sum(weight * rate, dX) * d_x
+                else:
+                    change = _natural_sum(weight * rate * d_x, dX)
+                if which == "r":
+                    dr = dr + change
+                else:
+                    dt = dt + change
+    return (r, t_sum), (dr, dt)
 
 
-hemispherical_adding_sums.defjvp(_jvp, symbolic_zeros=True)
+hemispherical_sums.defjvp(_jvp, symbolic_zeros=True)

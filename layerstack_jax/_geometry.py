@@ -19,9 +19,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._adding_sums import hemispherical_adding_sums
+from ._adding_sums import hemispherical_sums
 from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
-from ._response import (Interfaces, beer_factors, join_interfaces, natural, stack_interfaces, stack_intensities,
+from ._response import (Interfaces, join_interfaces, natural, stack_interfaces, stack_intensities, thick_layer_parameters,
                         thick_media)
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
@@ -176,9 +176,10 @@ def _diffuse_joined(rs: ResolvedStack, side: str, interfaces: Interfaces, w, pla
             sub = jax.tree_util.tree_map(lambda x: _node_slice(x, start, stop), interfaces)
             ws = w[start:stop]
         first, last = packets
-        ts = beer_factors(rs, sub.paths, first, last)
+        thickness, alpha = thick_layer_parameters(rs, first, last)
         # transmits=False: T = 0 exactly (an evanescent medium is in the way), not computed
-        r_part, t_part = hemispherical_adding_sums(tuple(sub.packets[first:last]), ts, ws, back, transmits)
+        r_part, t_part = hemispherical_sums(tuple(sub.packets[first:last]), tuple(sub.paths[first:last - 1]),
+                                            thickness, alpha, rs.wavelength, ws, back, transmits)
         r, t = r + r_part, t + t_part
     return Diffuse(r, jnp.zeros_like(r) + t)
 

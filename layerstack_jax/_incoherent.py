@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
 
-__all__ = ["slant_path", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
+__all__ = ["slant_path", "beer_rates", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
 
 
 def slant_path(n, q):
@@ -34,16 +34,34 @@ def slant_path(n, q):
     return jnp.real(q / n), jnp.imag(q)
 
 
-def beer_attenuation_along(cos_real, im_q, thickness, alpha, wavelength):
-    r"""Single-pass attenuation :math:`t` (see :func:`beer_attenuation`) from the slant path
-    ``(cos_real, im_q)`` of :func:`slant_path`; thickness in nm, alpha in 1/nm (or None),
-    wavelength in nm."""
-    optical_depth = (4 * jnp.pi / wavelength) * im_q * thickness
+def beer_rates(cos_real, im_q, alpha, wavelength):
+    r"""Attenuation per nm of thickness of a thick layer along the slant path ``(cos_real, im_q)``
+    of :func:`slant_path`: :math:`(\kappa, 1/\operatorname{Re}\cos\theta)` with
+    :math:`t = e^{-\kappa h}`,
+
+    .. math::
+        \kappa = \frac{4\pi}{\lambda}\operatorname{Im} q + \frac{\alpha}{\operatorname{Re}\cos\theta}
+
+    (1/nm; alpha in 1/nm or None, wavelength in nm). Where the layer is not reached
+    (:math:`\operatorname{Re}\cos\theta \le 0`, past its critical angle) the α term and
+    :math:`1/\operatorname{Re}\cos\theta` are returned as 0: finite, for the derivatives of
+    :mod:`layerstack_jax._adding_sums`, which multiply them by t = 0 there."""
+    ok = cos_real > 0
+    inv_cos = jnp.where(ok, 1.0 / jnp.where(ok, cos_real, 1.0), 0.0)
+    kappa = (4 * jnp.pi / wavelength) * im_q
     if alpha is not None:
-        ok = cos_real > 0
-        beer = alpha * thickness / jnp.where(ok, cos_real, 1.0)
-        optical_depth = optical_depth + jnp.where(ok, beer, jnp.inf)
-    return jnp.exp(-optical_depth)
+        kappa = kappa + alpha * inv_cos
+    return kappa, inv_cos
+
+
+def beer_attenuation_along(cos_real, im_q, thickness, alpha, wavelength):
+    r"""Single-pass attenuation :math:`t = e^{-\kappa h}` (see :func:`beer_attenuation` and
+    :func:`beer_rates`) from the slant path ``(cos_real, im_q)`` of :func:`slant_path`; thickness
+    in nm, alpha in 1/nm (or None), wavelength in nm. With α given, t = 0 where the layer is not
+    reached (:math:`\operatorname{Re}\cos\theta \le 0`)."""
+    kappa, _ = beer_rates(cos_real, im_q, alpha, wavelength)
+    t = jnp.exp(-kappa * thickness)
+    return t if alpha is None else jnp.where(cos_real > 0, t, 0.0)
 
 
 def beer_attenuation(n, q, thickness, alpha, wavelength):

@@ -20,7 +20,7 @@ from ._fresnel import normal_wavevector
 from ._incoherent import add_layer, beer_attenuation_along, slant_path
 from ._stack import ResolvedStack
 
-__all__ = ["thick_media", "Interfaces", "stack_interfaces", "beer_factors", "join_interfaces", "stack_intensities", "natural"]
+__all__ = ["thick_media", "Interfaces", "stack_interfaces", "thick_layer_parameters", "beer_factors", "join_interfaces", "stack_intensities", "natural"]
 
 
 def thick_media(coherent: tuple) -> list[int]:
@@ -57,16 +57,21 @@ def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interf
     return Interfaces(packets, paths)
 
 
+def thick_layer_parameters(rs: ResolvedStack, first: int = 0, last: int | None = None) -> tuple[tuple, tuple]:
+    """``(thicknesses, alphas)`` (nm, 1/nm or None) of the thick layers between packets
+    ``first … last-1`` (all of them by default), in stack order."""
+    thick = thick_media(rs.coherent)
+    last = len(thick) - 1 if last is None else last
+    layers = [thick[j + 1] - 1 for j in range(first, last - 1)]  # thick[j + 1] lies between packets j and j + 1
+    return tuple(rs.d[i] for i in layers), tuple(rs.alpha[i] for i in layers)
+
+
 def beer_factors(rs: ResolvedStack, paths: tuple, first: int = 0, last: int | None = None) -> tuple:
     """Single-pass attenuations :math:`t` of the thick layers between packets ``first … last-1``
-    (all of them by default), from their slant ``paths`` (:class:`Interfaces`): the only place
-    where thick-layer thicknesses and α enter the response."""
-    thick = thick_media(rs.coherent)
-    last = len(paths) + 1 if last is None else last
-    return tuple(
-        beer_attenuation_along(*paths[j], rs.d[thick[j + 1] - 1], rs.alpha[thick[j + 1] - 1], rs.wavelength)
-        for j in range(first, last - 1)  # thick[j + 1] lies between packets j and j + 1
-    )
+    (all of them by default), from their slant ``paths`` (:class:`Interfaces`, the paths of
+    those layers): the only place where thick-layer thicknesses and α enter the response."""
+    thickness, alpha = thick_layer_parameters(rs, first, last)
+    return tuple(beer_attenuation_along(*p, h, a, rs.wavelength) for p, h, a in zip(paths, thickness, alpha))
 
 
 def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True) -> PacketIntensities:

@@ -20,11 +20,12 @@ from __future__ import annotations
 from typing import NamedTuple, Sequence
 
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, safe_divide
 
-__all__ = ["PacketIntensities", "packet_amplitudes", "packet_intensities"]
+__all__ = ["PacketIntensities", "packet_amplitudes", "packet_intensities", "stack_packets"]
 
 # Packets with more films than this run through lax.scan (compile time independent of the
 # number of films); shorter ones are unrolled, which XLA fuses better.
@@ -98,25 +99,37 @@ def packet_amplitudes(n: Sequence, d: Sequence, s, wavelength):
         ``(gamma, tau, q)``: amplitudes shaped ``(2, *B)`` (polarization ``(s, p)`` first) and
         the normal wavevectors ``q`` of all media, shaped ``(F + 2, *B)``.
     """
-    # Fresnel terms only depend on the indices and s: keep them at that (often
-    # wavelength-free) shape, so that nothing wavelength-independent is computed per wavelength.
-    shape_n = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, s)))
-    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape_n) for x in n])
-    n_arr = n_arr.astype(jnp.result_type(n_arr.dtype, jnp.complex64))
+    n_arr = _media(n, s)
     q = normal_wavevector(n_arr, s)
     if len(n) > 2:
         q = q.at[1:-1].set(_lift_branch_point(q[1:-1]))
     r, t = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, F+1, *B)
+    gamma, tau = _packet_recursion(r, t, q[1:-1], d, wavelength)
+    return gamma, tau, q
+
+
+def _media(n: Sequence, s):
+    """The indices stacked ``(media, *B)`` as complex, B the broadcast shape of the indices and
+    the Snell invariant only: Fresnel terms depend on nothing else, so they stay at that (often
+    wavelength-free) shape and nothing wavelength-independent is computed per wavelength."""
+    shape_n = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, s)))
+    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape_n) for x in n])
+    return n_arr.astype(jnp.result_type(n_arr.dtype, jnp.complex64))
+
+
+def _packet_recursion(r, t, q_films, d: Sequence, wavelength):
+    """Rouard recursion of one packet from its interface amplitudes ``r, t`` ``(2, F+1, *B)``,
+    its films' normal wavevectors ``(F, *B)`` and thicknesses (nm). Returns ``(gamma, tau)``
+    shaped ``(2, *B')`` (B' also broadcast against the thicknesses and the wavelength)."""
     r, t = jnp.moveaxis(r, 0, 1), jnp.moveaxis(t, 0, 1)  # (F+1, 2, *B)
     if not d:
-        return r[0], t[0], q
-    shape = jnp.broadcast_shapes(shape_n, *(jnp.shape(x) for x in d), jnp.shape(wavelength))
+        return r[0], t[0]
+    shape = jnp.broadcast_shapes(q_films.shape[1:], *(jnp.shape(x) for x in d), jnp.shape(wavelength))
     d_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
-    phase = ((2 * jnp.pi / wavelength) * q[1:-1] * d_arr)[:, None]  # (F, 1, *B)
+    phase = ((2 * jnp.pi / wavelength) * q_films * d_arr)[:, None]  # (F, 1, *B)
     r = jnp.broadcast_to(r, (r.shape[0], 2, *shape))
     t = jnp.broadcast_to(t, (t.shape[0], 2, *shape))
-    gamma, tau = _rouard(r, t, phase)
-    return gamma, tau, q
+    return _rouard(r, t, phase)
 
 
 def _abs2(z):
@@ -155,3 +168,54 @@ def packet_intensities(n: Sequence, d: Sequence, s, wavelength, *, both_sides: b
     R_b = _abs2(gamma_b)
     T_b = safe_divide(_abs2(tau_b) * flux_first, flux_last)
     return PacketIntensities(R_f, T_f, R_b, T_b)
+
+
+def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength, *, both_sides: bool = True):
+    r"""Every packet of a stack at once: the runs of coherent films between the media at
+    positions ``bounds`` (the ambient, the thick layers and the exit medium).
+
+    Equal to :func:`packet_intensities` packet by packet, but the normal wavevectors, Fresnel
+    coefficients and power fluxes of all media and interfaces are computed in one vectorized
+    pass (front and back), so a stack of many thick layers compiles to a few kernels instead of
+    a few per interface; only packets that hold films run their own Rouard recursion.
+
+    Args:
+        n: complex indices of all media (ambient, layers…, exit), each broadcastable to ``*B``.
+        d: thicknesses (nm) of the layers (``len(n) - 2``); only those of films are used.
+        bounds: increasing positions in ``n`` of the semi-infinite and thick media, first 0 and
+            last ``len(n) - 1``.
+        s: Snell invariant, broadcastable to ``*B``; wavelength: nm.
+        both_sides: also the response to light from each packet's last medium.
+
+    Returns:
+        ``(packets, q)``: a tuple of :class:`PacketIntensities` (fields ``(2, *B)``, backs None
+        unless ``both_sides``), one per pair of consecutive bounds, and the normal wavevectors
+        of all media ``(media, *B)``.
+    """
+    n_arr = _media(n, s)
+    q = normal_wavevector(n_arr, s)
+    films = np.array([i for i in range(1, len(n) - 1) if i not in bounds], dtype=int)
+    if films.size:
+        q = q.at[films].set(_lift_branch_point(q[films]))
+    flux = power_flux(n_arr, q)  # (2, media, *B)
+    r_f, t_f = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, interface, *B)
+    R_f, T_f = _abs2(r_f), safe_divide(_abs2(t_f) * flux[:, 1:], flux[:, :-1])
+    if both_sides:
+        r_b, t_b = fresnel_amplitudes(n_arr[1:], q[1:], n_arr[:-1], q[:-1])
+        R_b, T_b = _abs2(r_b), safe_divide(_abs2(t_b) * flux[:, :-1], flux[:, 1:])
+    packets = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b == a + 1:  # a bare interface
+            backs = (R_b[:, a], T_b[:, a]) if both_sides else (None, None)
+            packets.append(PacketIntensities(R_f[:, a], T_f[:, a], *backs))
+            continue
+        film_d = tuple(d[a : b - 1])
+        gamma, tau = _packet_recursion(r_f[:, a:b], t_f[:, a:b], q[a + 1 : b], film_d, wavelength)
+        front = (_abs2(gamma), safe_divide(_abs2(tau) * flux[:, b], flux[:, a]))
+        backs = (None, None)
+        if both_sides:  # the reversed packet: interfaces b-1 … a seen from their far side
+            gamma, tau = _packet_recursion(r_b[:, a:b][:, ::-1], t_b[:, a:b][:, ::-1], q[a + 1 : b][::-1],
+                                           film_d[::-1], wavelength)
+            backs = (_abs2(gamma), safe_divide(_abs2(tau) * flux[:, a], flux[:, b]))
+        packets.append(PacketIntensities(*front, *backs))
+    return tuple(packets), q

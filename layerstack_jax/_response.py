@@ -15,8 +15,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ._coherent import PacketIntensities, packet_intensities
-from ._fresnel import normal_wavevector
+from ._coherent import PacketIntensities, stack_packets
 from ._incoherent import add_layer, beer_attenuation_along, slant_path
 from ._stack import ResolvedStack
 
@@ -44,16 +43,12 @@ class Interfaces(NamedTuple):
 
 def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interfaces:
     """The :class:`Interfaces` of ``rs`` at Snell invariant ``s`` (see :func:`stack_intensities`)."""
-    wl = rs.wavelength
     thick = thick_media(rs.coherent)
     # The running composition needs the back side of every packet but the last; XLA removes
     # whatever is not used by the caller.
     sides = both_sides or len(thick) > 2
-    packets = tuple(
-        packet_intensities(rs.n[a : b + 1], rs.d[a : b - 1], s, wl, both_sides=sides)
-        for a, b in zip(thick[:-1], thick[1:])
-    )
-    paths = tuple(slant_path(rs.n[a], normal_wavevector(rs.n[a], s)) for a in thick[1:-1])
+    packets, q = stack_packets(rs.n, rs.d, thick, s, rs.wavelength, both_sides=sides)
+    paths = tuple(slant_path(rs.n[a], q[a]) for a in thick[1:-1])
     return Interfaces(packets, paths)
 
 

@@ -31,27 +31,36 @@ where "near" / "in" refer to light arriving on P from the light's side.
 **Derivative.** A fit or a design differentiates r and t with respect to :math:`h_j`,
 :math:`\alpha_j(\lambda)` (and ρg, which does not enter here). Generic automatic differentiation
 carries one tangent per parameter through every step (forward mode), or stores the whole chain
-per node (reverse mode). Here the derivative of one step is written out,
+per node (reverse mode). Since :math:`\partial t_j/\partial h_j = -\kappa_j t_j` and
+:math:`\partial t_j/\partial\alpha_j = -t_j h_j/\operatorname{Re}\cos\theta_j`, what is needed
+are the *log-sensitivities* :math:`\ell_j = t_j\,\partial X/\partial t_j`. With step j written
+:math:`R_j = R^P_\text{near} + a_j R_{j-1}`, :math:`a_j = T^P_\text{in}T^P_\text{out}t_j^2/D_j`,
 
 .. math::
-    \frac{\partial R'}{\partial R} = \frac{T^P_\text{in}T^P_\text{out}t^2}{D^2},\quad
-    \frac{\partial R'}{\partial t} = \frac{2t\,T^P_\text{in}T^P_\text{out}R}{D^2},\quad
-    \frac{\partial T'}{\partial T} = \frac{T^P_\text{in}t}{D},\quad
-    \frac{\partial T'}{\partial R} = \frac{T'\,R^P_\text{far}t^2}{D},\quad
-    \frac{\partial T'}{\partial t} = \frac{T^P_\text{in}T\,(1 + R\,R^P_\text{far}t^2)}{D^2},
+    \frac{\partial R_j}{\partial R_{j-1}} = \frac{a_j}{D_j} =: A_j, \qquad
+    t_j\frac{\partial R_j}{\partial t_j} = 2R_{j-1}A_j, \qquad
+    \ell^R_j = \Big(\prod_{k>j} A_k\Big)\, 2R_{j-1}A_j,
 
-and the adjoints :math:`\partial R_\text{total}/\partial R`, :math:`\partial T_\text{total}/\partial(R, T)`
-run back through the stored steps: multiplications only, no new division. The weighted,
+and, from :math:`\log T = \sum_k \log(T^P_{\text{in},k}\,t_k/D_k)`,
+
+.. math::
+    \ell^T_j = T\,\Big(1 + \frac{2R_{j-1}R^P_{\text{far},j}t_j^2}{D_j} + \nu_j\, 2R_{j-1}A_j\Big),
+    \qquad \nu_{j-1} = \frac{R^P_{\text{far},j}t_j^2}{D_j} + A_j\,\nu_j,\ \nu_L = 0,
+
+where :math:`\nu_j = \partial\log T/\partial R_j`. Both run back through the stored steps of
+the forward sweep: multiplications only, no new division, finite where t = 0. The weighted,
 polarization-averaged sensitivities
 
 .. math::
-    S^h_j = -\sum_i w_i\,\tfrac12\sum_{s,p}\frac{\partial R}{\partial t_j}\,t_j\,\kappa_j, \qquad
-    S^\alpha_j = -\sum_i w_i\,\tfrac12\sum_{s,p}\frac{\partial R}{\partial t_j}\,t_j\,\frac{h_j}{\operatorname{Re}\cos\theta_j}
+    S^h_j = -\sum_i w_i\,\kappa_j\,\tfrac12\sum_{s,p}\ell_j, \qquad
+    S^\alpha_j = -\sum_i w_i\,\frac{h_j}{\operatorname{Re}\cos\theta_j}\,\tfrac12\sum_{s,p}\ell_j
 
-(and the same for T) are reduced over the nodes once per evaluation; each tangent (forward
-mode) or cotangent (reverse mode) then costs a multiply per wavelength. When an index, a
-coherent film, the quadrature weights or the wavelength carry a tangent (fitting an index or a
-film), the generic derivative of the same sweep is used.
+are reduced over the nodes once per evaluation; each tangent (forward mode) or cotangent
+(reverse mode) then costs a multiply per wavelength. On the P2 benchmark (3 Beer layers over a
+background, sphere, 401 λ) the gradient costs about 2–2.5 forward evaluations this way, against
+10–16 with generic reverse mode. When an index, a coherent film, the quadrature weights or the
+wavelength carry a tangent (fitting an index or a film), the generic derivative of the same
+sweep is used.
 """
 
 from __future__ import annotations
@@ -85,8 +94,9 @@ def _seen_from_light(packets, back: bool):
 
 
 def _sweep(packets, ts, back: bool, transmits: bool):
-    """One-sided adding rule (module docstring). Returns the final ``(R, T)`` and the per-step
-    record ``(R_before, T_before, T_after, 1/D, t, packet)`` for the adjoint sweep."""
+    """One-sided adding rule (module docstring). Returns the final ``(R, T)`` and, per step, what
+    the adjoint sweep needs: ``(R before the step, 1/D, t, (R_far, T_in, T_out) of the packet,
+    index of the layer crossed)``."""
     seen, order = _seen_from_light(packets, back)
     R, _, T, _ = seen[0]
     T = T if transmits else None
@@ -97,7 +107,7 @@ def _sweep(packets, ts, back: bool, transmits: bool):
         inv = safe_reciprocal(1.0 - R * R_far * t2)
         R_new = R_near + T_in * T_out * t2 * R * inv
         T_new = T_in * T * t * inv if transmits else None
-        steps.append((R, T, T_new, inv, t, (R_far, T_in, T_out), j))
+        steps.append((R, inv, t, (R_far, T_in, T_out), j))
         R, T = R_new, T_new
     return (R, T), steps
 
@@ -144,25 +154,25 @@ def _instantiate(primal, tangent):
     return jnp.zeros_like(primal) if isinstance(tangent, SymbolicZero) else tangent
 
 
-def _adjoint_derivatives(steps, transmits: bool):
-    """∂R_total/∂t_j and ∂T_total/∂t_j (per node and polarization) by the adjoint sweep of the
-    module docstring. Returns ``{j: (dR, dT or None)}``."""
+def _log_sensitivities(steps, T_total, transmits: bool):
+    r"""Log-sensitivities :math:`\ell^R_j = t_j\,\partial R/\partial t_j` and
+    :math:`\ell^T_j = t_j\,\partial T/\partial t_j` per node and polarization, by the adjoint
+    sweep of the module docstring (``steps`` from :func:`_sweep`, ``T_total`` its final T).
+    Returns ``{j: (ℓR, ℓT or None)}``."""
     out = {}
     g = 1.0  # ∂R_total/∂R after the step
-    lam_T, lam_R = 1.0, 0.0  # ∂T_total/∂T, ∂T_total/∂R after the step
-    for R, T, T_new, inv, t, (R_far, T_in, T_out), j in reversed(steps):
-        inv2 = inv * inv
-        a = T_in * T_out * inv2  # ∂R'/∂R = a t², ∂R'/∂t = 2 a t R
-        dR_dt = 2.0 * t * R * a
-        dR = g * dR_dt
-        dT = None
+    nu = 0.0  # ∂log T_total/∂R after the step
+    for R, inv, t, (R_far, T_in, T_out), j in reversed(steps):
+        t2 = t * t
+        at2 = T_in * T_out * t2 * inv * inv  # ∂R'/∂R
+        q = 2.0 * R * at2  # t ∂R'/∂t
+        lT = None
         if transmits:
-            c = R_far * t * t
-            dT_dt = T_in * T * (1.0 + R * c) * inv2
-            dT = lam_T * dT_dt + lam_R * dR_dt
-            lam_T, lam_R = lam_T * T_in * t * inv, lam_T * T_new * c * inv + lam_R * a * t * t
-        g = g * a * t * t
-        out[j] = (dR, dT)
+            c_inv = R_far * t2 * inv  # ∂log(1/D)/∂R
+            lT = T_total * (1.0 + 2.0 * R * c_inv + nu * q)
+            nu = c_inv + at2 * nu
+        out[j] = (g * q, lT)
+        g = g * at2
     return out
 
 
@@ -182,20 +192,20 @@ def _jvp(back, transmits, primals, tangents):
     wanted = [j for j in range(len(ts)) if not (_is_zero(d_thickness[j]) and _is_zero(d_alpha[j]))]
     if not wanted:
         return (r, t_sum), (dr, dt)
-    derivatives = _adjoint_derivatives(steps, transmits)
+    sensitivities = _log_sensitivities(steps, T, transmits)
     for j in wanted:
-        dR, dT = derivatives[j]
+        lR, lT = sensitivities[j]
         kappa, inv_cos = beer_rates(*paths[j], alpha[j], wavelength)
-        weight = -w * ts[j]  # w · ∂t/∂(κh)
+        # ∂t/∂h = -κ t, ∂t/∂α = -(h / Re cos θ) t
         for d_x, rate in ((d_thickness[j], kappa), (d_alpha[j], inv_cos * thickness[j])):
             if _is_zero(d_x):
                 continue
-            terms = [(dR, "r")] + ([(dT, "t")] if transmits else [])
-            for dX, which in terms:
+            terms = [(lR, "r")] + ([(lT, "t")] if transmits else [])
+            for lX, which in terms:
                 if jnp.ndim(d_x) <= 1:  # no node axis: reduce over the nodes once, then scale
-                    change = _natural_sum(weight * rate, dX) * d_x
+                    change = -_natural_sum(w * rate, lX) * d_x
                 else:
-                    change = _natural_sum(weight * rate * d_x, dX)
+                    change = -_natural_sum(w * rate * d_x, lX)
                 if which == "r":
                     dr = dr + change
                 else:

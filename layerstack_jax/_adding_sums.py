@@ -116,10 +116,14 @@ def _beer(paths, thickness, alpha, wavelength):
     return tuple(beer_attenuation_along(*p, h, a, wavelength) for p, h, a in zip(paths, thickness, alpha))
 
 
-def _plain(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
-    (R, T), _ = _sweep(packets, _beer(paths, thickness, alpha, wavelength), back, transmits)
+def _sums(R, T, w, transmits: bool):
     r = _natural_sum(w, R)
     return r, (_natural_sum(w, T) if transmits else jnp.zeros_like(r))
+
+
+def _plain(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
+    (R, T), _ = _sweep(packets, _beer(paths, thickness, alpha, wavelength), back, transmits)
+    return _sums(R, T, w, transmits)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(6, 7))
@@ -186,8 +190,7 @@ def _jvp(back, transmits, primals, tangents):
         return jax.jvp(lambda *p: _plain(*p, back, transmits), primals, tuple(d_all))
     ts = _beer(paths, thickness, alpha, wavelength)
     (R, T), steps = _sweep(packets, ts, back, transmits)
-    r = _natural_sum(w, R)
-    t_sum = _natural_sum(w, T) if transmits else jnp.zeros_like(r)
+    r, t_sum = _sums(R, T, w, transmits)
     dr, dt = jnp.zeros_like(r), jnp.zeros_like(r)
     wanted = [j for j in range(len(ts)) if not (_is_zero(d_thickness[j]) and _is_zero(d_alpha[j]))]
     if not wanted:
@@ -200,17 +203,18 @@ def _jvp(back, transmits, primals, tangents):
         for d_x, rate in ((d_thickness[j], kappa), (d_alpha[j], inv_cos * thickness[j])):
             if _is_zero(d_x):
                 continue
-            terms = [(lR, "r")] + ([(lT, "t")] if transmits else [])
-            for lX, which in terms:
-                if jnp.ndim(d_x) <= 1:  # no node axis: reduce over the nodes once, then scale
-                    change = -_natural_sum(w * rate, lX) * d_x
-                else:
-                    change = -_natural_sum(w * rate * d_x, lX)
-                if which == "r":
-                    dr = dr + change
-                else:
-                    dt = dt + change
+            dr = dr - _tangent_sum(w * rate, lR, d_x)
+            if transmits:
+                dt = dt - _tangent_sum(w * rate, lT, d_x)
     return (r, t_sum), (dr, dt)
+
+
+def _tangent_sum(w, log_sensitivity, d_x):
+    """Σ over nodes of w · natural(ℓ) · d_x; when the tangent d_x has no node axis (scalar or
+    ``(wl,)``: every thickness and α) the nodes are summed once and the result scaled."""
+    if jnp.ndim(d_x) <= 1:
+        return _natural_sum(w, log_sensitivity) * d_x
+    return _natural_sum(w * d_x, log_sensitivity)
 
 
 hemispherical_sums.defjvp(_jvp, symbolic_zeros=True)

@@ -61,11 +61,11 @@ def thick_layer_parameters(rs: ResolvedStack, first: int = 0, last: int | None =
     return tuple(rs.d[i] for i in layers), tuple(rs.alpha[i] for i in layers)
 
 
-def beer_factors(rs: ResolvedStack, paths: tuple, first: int = 0, last: int | None = None) -> tuple:
-    """Single-pass attenuations :math:`t` of the thick layers between packets ``first … last-1``
-    (all of them by default), from their slant ``paths`` (:class:`Interfaces`, the paths of
-    those layers): the only place where thick-layer thicknesses and α enter the response."""
-    thickness, alpha = thick_layer_parameters(rs, first, last)
+def beer_factors(rs: ResolvedStack, paths: tuple) -> tuple:
+    """Single-pass attenuations :math:`t` of all the thick layers of ``rs`` from their slant
+    ``paths`` (:class:`Interfaces`). (The diffuse sums compute theirs inside
+    :func:`~layerstack_jax._adding_sums.hemispherical_sums`, which owns their derivative.)"""
+    thickness, alpha = thick_layer_parameters(rs)
     return tuple(beer_attenuation_along(*p, h, a, rs.wavelength) for p, h, a in zip(paths, thickness, alpha))
 
 

@@ -167,7 +167,10 @@ def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength
     and power fluxes of all media and interfaces are computed in one vectorized pass (front and
     back), so a stack of many thick layers compiles to a few kernels instead of a few per
     interface (P2 benchmark: 63 instead of 204, 0.8 s instead of 1.9 s of XLA compilation); only
-    packets that hold films run their own Rouard recursion.
+    packets that hold films run their own Rouard recursion. The price: all interfaces share one
+    shape, so when one medium is dispersive the interfaces between dispersionless media are
+    computed per wavelength too (Fresnel algebra only; a fit computes it once, see
+    :func:`layerstack_jax.fixed_optics`).
 
     Args:
         n: complex indices of all media (ambient, layers…, exit), each broadcastable to ``*B``.

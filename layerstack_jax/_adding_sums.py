@@ -71,7 +71,7 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
-from ._incoherent import beer_attenuation_along, beer_rates, safe_reciprocal
+from ._incoherent import beer_factor, beer_rates, safe_reciprocal
 
 __all__ = ["hemispherical_sums"]
 
@@ -113,7 +113,12 @@ def _sweep(packets, ts, back: bool, transmits: bool):
 
 
 def _beer(paths, thickness, alpha, wavelength):
-    return tuple(beer_attenuation_along(*p, h, a, wavelength) for p, h, a in zip(paths, thickness, alpha))
+    """Beer factors t_j of the thick layers and their rates ``(κ_j, 1/Re cos θ_j)``
+    (:func:`~layerstack_jax._incoherent.beer_rates`), computed once for the sweep and its derivative."""
+    rates = tuple(beer_rates(*p, a, wavelength) for p, a in zip(paths, alpha))
+    ts = tuple(beer_factor(kappa, h, p[0], a is not None)
+               for (kappa, _), h, p, a in zip(rates, thickness, paths, alpha))
+    return ts, rates
 
 
 def _sums(R, T, w, transmits: bool):
@@ -122,7 +127,8 @@ def _sums(R, T, w, transmits: bool):
 
 
 def _plain(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
-    (R, T), _ = _sweep(packets, _beer(paths, thickness, alpha, wavelength), back, transmits)
+    ts, _ = _beer(paths, thickness, alpha, wavelength)
+    (R, T), _ = _sweep(packets, ts, back, transmits)
     return _sums(R, T, w, transmits)
 
 
@@ -188,7 +194,7 @@ def _jvp(back, transmits, primals, tangents):
         d_all = jax.tree_util.tree_map(_instantiate, primals, tangents[:6],
                                        is_leaf=lambda x: isinstance(x, SymbolicZero))
         return jax.jvp(lambda *p: _plain(*p, back, transmits), primals, tuple(d_all))
-    ts = _beer(paths, thickness, alpha, wavelength)
+    ts, rates = _beer(paths, thickness, alpha, wavelength)
     (R, T), steps = _sweep(packets, ts, back, transmits)
     r, t_sum = _sums(R, T, w, transmits)
     dr, dt = jnp.zeros_like(r), jnp.zeros_like(r)
@@ -198,7 +204,7 @@ def _jvp(back, transmits, primals, tangents):
     sensitivities = _log_sensitivities(steps, T, transmits)
     for j in wanted:
         lR, lT = sensitivities[j]
-        kappa, inv_cos = beer_rates(*paths[j], alpha[j], wavelength)
+        kappa, inv_cos = rates[j]
         # ∂t/∂h = -κ t, ∂t/∂α = -(h / Re cos θ) t
         for d_x, rate in ((d_thickness[j], kappa), (d_alpha[j], inv_cos * thickness[j])):
             if _is_zero(d_x):

@@ -25,7 +25,7 @@ from jax import lax
 
 from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, safe_divide
 
-__all__ = ["PacketIntensities", "packet_amplitudes", "packet_intensities", "stack_packets"]
+__all__ = ["PacketIntensities", "packet_amplitudes", "stack_packets"]
 
 # Packets with more films than this run through lax.scan (compile time independent of the
 # number of films); shorter ones are unrolled, which XLA fuses better.
@@ -138,39 +138,26 @@ def _abs2(z):
     return jnp.real(z) ** 2 + jnp.imag(z) ** 2
 
 
-def packet_intensities(n: Sequence, d: Sequence, s, wavelength, *, both_sides: bool = True):
-    r"""Intensity reflectance and transmittance of a coherent packet from both sides.
+def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength, *, both_sides: bool = True):
+    r"""Intensity reflectance and transmittance, from both sides, of every packet of a stack:
+    the runs of coherent films between the media at positions ``bounds`` (the ambient, the thick
+    layers and the exit medium).
 
     :math:`R = |\gamma|^2` and :math:`T = |\tau|^2\,\Phi_\text{exit} / \Phi_\text{incidence}` with the
     power fluxes of :func:`layerstack_jax._fresnel.power_flux` (Hirayama eqs. 5–6 per polarization,
-    before any averaging). ``T`` is the power that enters the exit medium, also when that medium
-    absorbs (then it is absorbed there). Light arriving at grazing incidence or from an
-    evanescent medium has zero flux; its ``T`` is set to 0.
+    before any averaging). ``T`` is the power that enters the packet's last medium, also when
+    that medium absorbs. Light arriving at grazing incidence or from an evanescent medium has
+    zero flux; its ``T`` is set to 0. The back side (light from the last medium) is the same
+    recursion on the reversed packet; with an absorbing film ``R_back != R_front`` while
+    ``T_back == T_front`` for real outer media (reciprocity, Simonot eq. 44).
 
-    The back side (light from the last medium) is the same recursion on the reversed packet;
-    with an absorbing film ``R_back != R_front`` while ``T_back == T_front`` for real outer
-    media (reciprocity, Simonot eq. 44).
-
-    Returns:
-        :class:`PacketIntensities` with fields shaped ``(2, *B)``; the ``*_back`` fields are
-        ``None`` when ``both_sides`` is false.
-    """
-    (packet,), _ = stack_packets(n, d, (0, len(n) - 1), s, wavelength, both_sides=both_sides)
-    return packet
-
-
-def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength, *, both_sides: bool = True):
-    r"""Every packet of a stack at once: the runs of coherent films between the media at
-    positions ``bounds`` (the ambient, the thick layers and the exit medium).
-
-    :func:`packet_intensities` for each packet, but the normal wavevectors, Fresnel coefficients
-    and power fluxes of all media and interfaces are computed in one vectorized pass (front and
-    back), so a stack of many thick layers compiles to a few kernels instead of a few per
-    interface (P2 benchmark: 63 instead of 204, 0.8 s instead of 1.9 s of XLA compilation); only
-    packets that hold films run their own Rouard recursion. The price: all interfaces share one
-    shape, so when one medium is dispersive the interfaces between dispersionless media are
-    computed per wavelength too (Fresnel algebra only; a fit computes it once, see
-    :func:`layerstack_jax.fixed_optics`).
+    The normal wavevectors, Fresnel coefficients and power fluxes of all media and interfaces
+    are computed in one vectorized pass (front and back), so a stack of many thick layers
+    compiles to a few kernels instead of a few per interface (P2 benchmark: 63 instead of 204,
+    0.8 s instead of 1.9 s of XLA compilation); only packets that hold films run their own
+    Rouard recursion. The price: all interfaces share one shape, so when one medium is
+    dispersive the interfaces between dispersionless media are computed per wavelength too
+    (Fresnel algebra only; a fit computes it once, see :func:`layerstack_jax.fixed_optics`).
 
     Args:
         n: complex indices of all media (ambient, layers…, exit), each broadcastable to ``*B``.

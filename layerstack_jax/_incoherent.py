@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
 
-__all__ = ["slant_path", "beer_rates", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
+__all__ = ["slant_path", "beer_rates", "beer_factor", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
 
 
 def slant_path(n, q):
@@ -54,14 +54,21 @@ def beer_rates(cos_real, im_q, alpha, wavelength):
     return kappa, inv_cos
 
 
+def beer_factor(kappa, thickness, cos_real, absorbing: bool):
+    r"""Single-pass attenuation :math:`t = e^{-\kappa h}` from the rate ``kappa`` of
+    :func:`beer_rates` (1/nm) and the thickness (nm); with an absorption coefficient given
+    (``absorbing``), t = 0 where the layer is not reached (:math:`\operatorname{Re}\cos\theta \le 0`)."""
+    t = jnp.exp(-kappa * thickness)
+    return jnp.where(cos_real > 0, t, 0.0) if absorbing else t
+
+
 def beer_attenuation_along(cos_real, im_q, thickness, alpha, wavelength):
     r"""Single-pass attenuation :math:`t = e^{-\kappa h}` (see :func:`beer_attenuation` and
     :func:`beer_rates`) from the slant path ``(cos_real, im_q)`` of :func:`slant_path`; thickness
     in nm, alpha in 1/nm (or None), wavelength in nm. With α given, t = 0 where the layer is not
     reached (:math:`\operatorname{Re}\cos\theta \le 0`)."""
     kappa, _ = beer_rates(cos_real, im_q, alpha, wavelength)
-    t = jnp.exp(-kappa * thickness)
-    return t if alpha is None else jnp.where(cos_real > 0, t, 0.0)
+    return beer_factor(kappa, thickness, cos_real, alpha is not None)
 
 
 def beer_attenuation(n, q, thickness, alpha, wavelength):

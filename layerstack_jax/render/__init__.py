@@ -1,0 +1,16 @@
+"""Rendering coated objects with Mitsuba 3 (optional extra: ``pip install 'layerstack-jax[render]'``).
+
+Hirayama et al. §5: reflectance tables of the coating, pre-computed over angle and wavelength,
+are interpolated by a ray tracer. :func:`coated_bsdf` turns a ``CoatingTables`` into a Mitsuba
+BSDF (scalar spectral variants); :mod:`layerstack_jax.render._scenes` builds the scenes of the
+paper's Figs. 8–9. Mitsuba is imported only when one of these functions is called, never by
+``import layerstack_jax``.
+"""
+
+from ._lookup import DEFENSIVE as DEFENSIVE
+from ._lookup import CoatingTables as CoatingTables
+from ._lookup import TableSurface as TableSurface
+from ._mitsuba import PLUGIN_NAME as PLUGIN_NAME
+from ._mitsuba import coated_bsdf as coated_bsdf
+from ._mitsuba import import_mitsuba as import_mitsuba
+from ._mitsuba import register as register

@@ -1,0 +1,157 @@
+"""Table interpolation and sampling of the render plugin (no Mitsuba needed).
+
+References: scipy's RegularGridInterpolator (an independent multilinear interpolator) for the
+values; quadrature over the hemisphere for the normalization of the sampling pdf; the mean of
+f·cos/pdf over sampled directions against that quadrature (an estimator that is biased if
+sample and pdf disagree)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.interpolate import RegularGridInterpolator
+
+from layerstack_jax._validate import LayerstackError
+from layerstack_jax.render._lookup import DEFENSIVE, CoatingTables, TableSurface, _azimuth
+
+
+def _tables(seed=0, A=7, B=6, P=5, L=9):
+    rng = np.random.default_rng(seed)
+    wl = np.sort(rng.uniform(380, 780, L))
+    ct = np.sort(rng.uniform(0.05, 1.0, A))
+    co = np.sort(rng.uniform(0.05, 1.0, B))
+    ph = np.sort(rng.uniform(0.0, np.pi, P))
+    k_r = rng.uniform(0.0, 0.4, (A, L))
+    k_d = rng.uniform(0.0, 0.1, (A, B, P, L))
+    return CoatingTables(wl, ct, k_r, np.zeros_like(k_r), ph, co, k_d, 0.0)
+
+
+def _direction(cos_t, phi):
+    s = math.sqrt(1 - cos_t * cos_t)
+    return (s * math.cos(phi), s * math.sin(phi), cos_t)
+
+
+def test_values_match_scipy_multilinear():
+    t = _tables()
+    surf = TableSurface(t)
+    rng = np.random.default_rng(1)
+    kr_ref = RegularGridInterpolator((t.cos_theta, t.wavelength_nm), t.k_r)
+    kd_ref = RegularGridInterpolator((t.cos_theta, t.cos_theta_out, t.phi_out, t.wavelength_nm), t.k_d)
+    err_r = err_d = 0.0
+    for _ in range(200):
+        # points inside every grid (outside, the lookup clamps: tested below)
+        ci = rng.uniform(t.cos_theta[0], t.cos_theta[-1])
+        co = rng.uniform(t.cos_theta_out[0], t.cos_theta_out[-1])
+        dphi = rng.uniform(t.phi_out[0], t.phi_out[-1])
+        wls = rng.uniform(t.wavelength_nm[0], t.wavelength_nm[-1], 4)
+        phi_i = rng.uniform(-np.pi, np.pi)
+        sign = rng.choice([-1.0, 1.0])
+        wi, wo = _direction(ci, phi_i), _direction(co, phi_i + sign * dphi)
+        got_r = surf.specular(ci, wls)
+        got_d = surf.brdf(wi, wo, wls)
+        err_r = max(err_r, np.abs(np.array(got_r) - kr_ref(np.stack([np.full(4, ci), wls], -1))).max())
+        pts = np.stack([np.full(4, ci), np.full(4, co), np.full(4, dphi), wls], -1)
+        err_d = max(err_d, np.abs(np.array(got_d) - kd_ref(pts)).max())
+    assert err_r < 1e-12 and err_d < 1e-12
+
+
+def test_clamped_outside_grids_and_below_horizon():
+    t = _tables()
+    surf = TableSurface(t)
+    assert surf.specular(1.0, [300.0, 900.0]) == pytest.approx([t.k_r[-1, 0], t.k_r[-1, -1]], abs=1e-15)
+    assert surf.specular(1e-3, [t.wavelength_nm[2]]) == pytest.approx([t.k_r[0, 2]], abs=1e-15)
+    assert surf.specular(-0.2, [500.0]) == [0.0]
+    assert surf.brdf((0, 0, 1.0), (0.6, 0, -0.8), [500.0]) == [0.0]
+
+
+def test_azimuth_convention():
+    wi = _direction(0.8, 0.3)
+    mirror = (-wi[0], -wi[1], wi[2])
+    assert _azimuth(wi, mirror) == pytest.approx(math.pi)
+    assert _azimuth(wi, _direction(0.5, 0.3)) == pytest.approx(0.0, abs=1e-7)
+    assert _azimuth(wi, _direction(0.5, 0.3 + 1.0)) == pytest.approx(1.0)
+    assert _azimuth(wi, _direction(0.5, 0.3 - 1.0)) == pytest.approx(1.0)
+    assert _azimuth((0, 0, 1.0), _direction(0.5, 2.0)) == pytest.approx(math.pi)
+
+
+def _hemisphere_integral(fn, n_mu=200, n_phi=400):
+    """∫ fn(wo) dω over the upper hemisphere by the midpoint rule in (cos θ, φ)."""
+    mu = (np.arange(n_mu) + 0.5) / n_mu
+    phi = (np.arange(n_phi) + 0.5) / n_phi * 2 * np.pi
+    total = 0.0
+    for m in mu:
+        for p in phi:
+            total += fn(_direction(m, p))
+    return total * (1.0 / n_mu) * (2 * np.pi / n_phi)
+
+
+@pytest.mark.parametrize("cos_i", [0.93, 0.4])
+def test_pdf_normalized_and_sampling_unbiased(cos_i):
+    t = _tables(seed=3, L=3)
+    surf = TableSurface(t)
+    wi = _direction(cos_i, 0.7)
+    wls = [450.0, 550.0, 650.0]
+    norm = _hemisphere_integral(lambda wo: surf.lobe_pdf(wi, wo), 100, 200)
+    assert norm == pytest.approx(1.0, abs=2e-3)
+    albedo = _hemisphere_integral(lambda wo: surf.brdf(wi, wo, wls)[1] * wo[2], 100, 200)
+    rng = np.random.default_rng(4)
+    n = 40000
+    u = rng.random((n, 3))
+    est = np.empty(n)
+    for j in range(n):
+        wo = surf.sample_lobe(wi, u[j, 0], (u[j, 1], u[j, 2]))
+        pdf = surf.lobe_pdf(wi, wo)
+        est[j] = surf.brdf(wi, wo, wls)[1] * wo[2] / pdf if pdf > 0 else 0.0
+    sigma = est.std() / math.sqrt(n)
+    assert abs(est.mean() - albedo) < 4 * sigma + 2e-3 * albedo
+
+
+def test_specular_probability_and_flags():
+    t = _tables()
+    surf = TableSurface(t)
+    p = surf.specular_probability(0.7)
+    assert 0.0 < p < 1.0
+    smooth = TableSurface(t._replace(k_d=np.zeros_like(t.k_d)))
+    assert smooth.specular_probability(0.7) == 1.0 and not smooth.has_diffuse
+    lobe_only = TableSurface(t._replace(k_r=np.zeros_like(t.k_r)))
+    assert lobe_only.specular_probability(0.7) == 0.0 and not lobe_only.has_specular
+    assert DEFENSIVE > 0
+
+
+def test_single_node_grids():
+    t = _tables(A=1, B=1, P=1, L=1)
+    surf = TableSurface(t)
+    assert surf.specular(0.3, [400.0, 700.0]) == pytest.approx([t.k_r[0, 0]] * 2)
+    wi, wo = _direction(0.9, 0.0), _direction(0.2, 2.0)
+    assert surf.brdf(wi, wo, [500.0]) == pytest.approx([t.k_d[0, 0, 0, 0]])
+    norm = _hemisphere_integral(lambda w: surf.lobe_pdf(wi, w), 400, 40)
+    assert norm == pytest.approx(1.0, abs=2e-3)
+
+
+@pytest.mark.parametrize(
+    "field, value, match",
+    [
+        ("cos_theta", lambda t: t.cos_theta[::-1], "cos_theta must be strictly ascending"),
+        ("cos_theta_out", lambda t: t.cos_theta_out + 1.0, "cos_theta_out must lie in"),
+        ("phi_out", lambda t: t.phi_out * 2, "phi_out must lie in"),
+        ("k_r", lambda t: t.k_r[:, :-1], "k_r must have shape"),
+        ("k_d", lambda t: -t.k_d, "k_d must be >= 0"),
+        ("k_r", lambda t: np.where(t.k_r > 0.2, np.nan, t.k_r), "k_r contains NaN"),
+    ],
+)
+def test_bad_tables_name_the_field(field, value, match):
+    t = _tables()
+    with pytest.raises(LayerstackError, match=match):
+        TableSurface(t._replace(**{field: value(t)}))
+
+
+def test_missing_field_and_warnings():
+    with pytest.raises(LayerstackError, match="k_d"):
+        TableSurface(object())
+    t = _tables()
+    with pytest.warns(UserWarning, match="k_t is non-zero"):
+        TableSurface(t._replace(k_t=np.full_like(t.k_r, 0.1)))
+    with pytest.warns(UserWarning, match="creates energy"):
+        TableSurface(t._replace(k_d=t.k_d * 50))

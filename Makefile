@@ -18,11 +18,11 @@ demo: $(STAMP)
 	mkdir -p out
 	# main job: fit the shipped (synthetic, labelled) calibration series of a varnish over a red paint
 	$(PY) examples/fit_calibration_series.py
-	$(PY) -m layerstack_jax.cli fit examples/calibration_fit.toml examples/calibration_series.csv -g 45/0 --joint --background background --sigma 0.002 -o out/calibration_fit.json --plot out/calibration_fit.png
-	$(PY) -m layerstack_jax.cli predict examples/varnished_painting.toml --wavelengths 380:780:5 --geometry 45/0 -o out/varnished_painting_45-0.csv --plot out/varnished_painting_45-0.png
-	$(PY) -m layerstack_jax.cli predict examples/thin_film_on_metal.toml --wavelengths 380:780:5 --geometry specular:30 -o out/thin_film_on_metal.csv --plot out/thin_film_on_metal.png
+	$(PY) -m layerstack_cli fit examples/calibration_fit.toml examples/calibration_series.csv -g 45/0 --joint --background background --sigma 0.002 -o out/calibration_fit.json --plot out/calibration_fit.png
+	$(PY) -m layerstack_cli predict examples/varnished_painting.toml --wavelengths 380:780:5 --geometry 45/0 -o out/varnished_painting_45-0.csv --plot out/varnished_painting_45-0.png
+	$(PY) -m layerstack_cli predict examples/thin_film_on_metal.toml --wavelengths 380:780:5 --geometry specular:30 -o out/thin_film_on_metal.csv --plot out/thin_film_on_metal.png
 	# design: a four-layer broadband AR coating from database materials (exit 1 if its targets are not met)
-	$(PY) -m layerstack_jax.cli design examples/ar_coating_design.toml -o out/ar_design.toml --plot out/ar_design.png
+	$(PY) -m layerstack_cli design examples/ar_coating_design.toml -o out/ar_design.toml --plot out/ar_design.png
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 -q

@@ -17,7 +17,11 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
   thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
 * :mod:`fitting._design_file` — design files for ``layerstack design`` (targets, optimizer and
-  robustness tables on top of a stack file; format in :mod:`layerstack_jax.io`).
+  robustness tables on top of a stack file; this module owns their format):
+  :func:`load_design`, :func:`run_design`, :func:`design_report`, :func:`plot_design`.
+
+Stack files with free-parameter annotations become :class:`Parameter` objects in one place,
+:func:`parameters_from_declarations` (:func:`load_fit_parameters` reads the file).
 
 The forward model is always the public :func:`layerstack_jax.reflectance`; fitting never reaches
 inside it. Units: nm, 1/nm, degrees in geometries, as in :mod:`layerstack_jax`.
@@ -40,6 +44,13 @@ from ._design import needle_function as needle_function
 from ._design import optimize_thicknesses as optimize_thicknesses
 from ._design import thickness_yield as thickness_yield
 from ._design import with_thicknesses as with_thicknesses
+from ._design_file import DesignFile as DesignFile
+from ._design_file import DesignOutcome as DesignOutcome
+from ._design_file import design_report as design_report
+from ._design_file import design_stack_dict as design_stack_dict
+from ._design_file import load_design as load_design
+from ._design_file import plot_design as plot_design
+from ._design_file import run_design as run_design
 from ._objective import Dataset as Dataset
 from ._objective import Objective as Objective
 from ._objective import resample as resample
@@ -48,6 +59,8 @@ from ._parameters import alpha as alpha
 from ._parameters import bspline_basis as bspline_basis
 from ._parameters import dispersion as dispersion
 from ._parameters import index_n as index_n
+from ._parameters import load_fit_parameters as load_fit_parameters
+from ._parameters import parameters_from_declarations as parameters_from_declarations
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult
@@ -87,4 +100,13 @@ __all__ = [
     "optimize_thicknesses",
     "thickness_yield",
     "with_thicknesses",
+    "DesignFile",
+    "DesignOutcome",
+    "design_report",
+    "design_stack_dict",
+    "load_design",
+    "plot_design",
+    "run_design",
+    "load_fit_parameters",
+    "parameters_from_declarations",
 ]

@@ -2,8 +2,85 @@ r"""Design files: ``layerstack design DESIGN.toml -o design.toml``.
 
 A design file is a stack file (:mod:`layerstack_jax.io`) whose optimised layers carry
 ``thickness_nm = { value = ..., free = true, min = ..., max = ... }``, plus ``[[targets]]``, an
-optional ``[optimizer]`` and an optional ``[robustness]`` table. The format is documented in the
-:mod:`layerstack_jax.io` docstring ("Design files").
+optional ``[optimizer]`` and an optional ``[robustness]`` table. This module owns the format (the
+stack-file part is :mod:`layerstack_jax.io`'s, read with the same grammar).
+
+Format
+------
+``layerstack design DESIGN.toml -o design.toml [--plot design.png]`` optimises layer
+thicknesses (implementation: :mod:`fitting._design_file` on :mod:`fitting._design`). A design
+file is a stack file — same ``description``, ``[ambient]``, ``[[layers]]``, ``[substrate]``
+tables — whose layers to optimise say so, plus what the coating must do::
+
+    [[layers]]
+    name = "MgF2"
+    n = { material = "MgF2", source = "Li-o" }
+    thickness_nm = { value = 100, free = true, min = 0, max = 400 }   # optimised in [min, max]
+    coherent = true                 # (defaults min = 0, max = 1000 nm; a plain number stays fixed)
+
+    [substrate]                     # a specular substrate ([background] is not supported)
+    n = 1.52
+
+    [[targets]]                     # one or more; type = "spectral" (default) or "colour"
+    name = "visible AR"             # optional, used in the report
+    quantity = "R"                  # R, T or A: specular, light from the ambient
+    band_nm = [420, 680]            # a band, both ends included ...
+    step_nm = 10                    #   ... sampled every step_nm (default 5)
+    # wavelength_nm = 550           # ... or one wavelength or a list [450, 550, 650]
+    angle_deg = 0                   # angle of incidence or list of angles, degrees (default 0)
+    polarization = "natural"        # natural (default), s or p
+    value = 0.0                     # aim; passes where |Q − value| <= tolerance everywhere ...
+    tolerance = 0.005               #   (default 0.01; also the merit's unit of deviation)
+    # max = 0.005 / min = 0.9       # ... or one-sided bound(s): pass where min <= Q <= max
+    weight = 1.0                    # weight in the merit (default 1)
+
+    [[targets]]
+    type = "colour"                 # CIELAB of the natural-light specular reflectance
+    lab = [60.0, 20.0, -30.0]       # target L*, a*, b* (or one triple per angle)
+    angle_deg = [0, 45]
+    illuminant = "D65"              # colour-science names: D65, D50, A, F2 ... (default D65)
+    observer = "2"                  # "2" (CIE 1931, default) or "10" (CIE 1964)
+    tolerance = 1.0                 # ΔE2000: passes where ΔE2000 <= tolerance at every angle
+    weight = 1.0                    # (step_nm = 5: the 380–780 nm colorimetry grid)
+
+    [optimizer]                     # optional
+    method = "scipy"                # L-BFGS-B within the bounds, exact gradients: "scipy" (default:
+                                    #   SciPy's, starts in turn, seconds to start) or "jaxopt" (starts
+                                    #   vmapped in one compiled solve: many starts, GPU)
+    starts = 8                      # the file's thicknesses plus 7 random starts (default 1)
+    seed = 0
+    max_steps = 500                 # iteration cap per start (default 500)
+    gradient_tolerance = 1e-9       # on the projected gradient (default 1e-9)
+
+    [optimizer.needle]              # optional: grow the design by the needle method
+    materials = [{ name = "SiO2", n = 1.46 }, { name = "TiO2", n = { material = "TiO2", source = "Sarkar" } }]
+    iterations = 3                  # needle insertions at most (default 3)
+    min_thickness_nm = 0.5          # thinner films are removed (default 0.5)
+    max_thickness_nm = 400          # bound of every film once needles are in (default: largest max)
+    max_layers = 12                 # optional cap
+    points_per_layer = 32           # needle-function samples per film (default 32)
+
+    [robustness]                    # optional: random thickness errors N(0, (sigma_nm + relative·d)²)
+    sigma_nm = 1.0
+    relative = 0.01
+    samples = 200                   # draws (default 200) → yield = fraction meeting every target
+    seed = 0
+    optimize = false                # true: minimise the mean merit over the draws (robust design)
+    min_yield = 0.9                 # optional requirement on the yield
+
+The merit is Σ weight · mean((Q − value)/tolerance)² over targets (one-sided bounds count only
+the excess; colour targets (ΔE2000/tolerance)²). With a needle table every coherent layer
+must be free (and no incoherent one): the needle method refines every thin film, first within
+the layers' own bounds, then in [0, max_thickness_nm]. Materials (layers and needle
+candidates) must cover every target's wavelengths.
+
+The output is a stack file (for :func:`load_stack`, ``layerstack predict``): the layers as
+written (database references kept, relative table paths rebased), plain designed thicknesses,
+needle layers named after their material, repeated names numbered; its ``#`` header holds the
+report — merit before and after, each target's result (mean/min/max of Q, Lab and ΔE2000) and
+the yield. ``layerstack design`` exits with status 0 when every target (and ``min_yield``) is
+met, 1 when not (the file is still written), 2 for a bad file.
+
 
 Data flow, one way:
 
@@ -31,7 +108,6 @@ import dataclasses
 import math
 import os
 import time
-import tomllib
 from pathlib import Path
 from typing import Mapping, Optional
 
@@ -43,7 +119,8 @@ import numpy as np
 import layerstack_jax as ls
 from layerstack_jax._stack import resolve
 from layerstack_jax import LayerstackError
-from layerstack_jax.io import _FREE_KEYS, _is_number, _material, _number, _reject_unknown, _Where, stack_from_dict
+from layerstack_jax.io import (FREE_KEYS, FileLocation, is_number, read_material, read_number, read_toml,
+                               reject_unknown_keys, stack_from_dict)
 
 from ._design import (
     ColourTarget,
@@ -142,47 +219,35 @@ class DesignFile:
 
 
 # ------------------------------------------------------------------------------- parsing
-def _read(path: Path) -> dict:
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except FileNotFoundError:
-        raise LayerstackError(f"{path}: design file not found") from None
-    except tomllib.TOMLDecodeError as e:
-        raise LayerstackError(f"{path}: invalid TOML: {e}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LayerstackError(f"{path}: cannot read design file: {e}") from None
-
-
-def _table(where: _Where, d: Mapping, key: str) -> Mapping:
+def _table(where: FileLocation, d: Mapping, key: str) -> Mapping:
     t = d.get(key, {})
     if not isinstance(t, Mapping):
         raise where.error(f"must be a table [{key}], got {t!r}", key)
     return t
 
 
-def _integer(where: _Where, key: str, x, minimum: int) -> int:
+def _integer(where: FileLocation, key: str, x, minimum: int) -> int:
     if not isinstance(x, int) or isinstance(x, bool) or x < minimum:
         raise where.error(f"must be an integer >= {minimum}, got {x!r}", key)
     return int(x)
 
 
-def _boolean(where: _Where, key: str, x) -> bool:
+def _boolean(where: FileLocation, key: str, x) -> bool:
     if not isinstance(x, bool):
         raise where.error(f"must be true or false, got {x!r}", key)
     return x
 
 
-def _string(where: _Where, key: str, x) -> str:
+def _string(where: FileLocation, key: str, x) -> str:
     if not isinstance(x, str) or not x.strip():
         raise where.error(f"must be a non-empty string, got {x!r}", key)
     return x.strip()
 
 
-def _numbers(where: _Where, key: str, x, what: str) -> np.ndarray:
+def _numbers(where: FileLocation, key: str, x, what: str) -> np.ndarray:
     """A number or a non-empty list of finite numbers, as a 1-D array."""
-    values = [x] if _is_number(x) else x
-    if not isinstance(values, list) or not values or not all(_is_number(v) for v in values):
+    values = [x] if is_number(x) else x
+    if not isinstance(values, list) or not values or not all(is_number(v) for v in values):
         raise where.error(f"must be a number or a non-empty list of numbers ({what}), got {x!r}", key)
     a = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(a)):
@@ -190,14 +255,14 @@ def _numbers(where: _Where, key: str, x, what: str) -> np.ndarray:
     return a
 
 
-def _angles(where: _Where, t: Mapping) -> np.ndarray:
+def _angles(where: FileLocation, t: Mapping) -> np.ndarray:
     a = _numbers(where, "angle_deg", t.get("angle_deg", 0.0), "angles of incidence in degrees")
     if np.any(a < 0) or np.any(a >= 90):
         raise where.error(f"angles must lie in [0, 90) degrees, got {a.tolist()}", "angle_deg")
     return a
 
 
-def _grid(where: _Where, t: Mapping) -> np.ndarray:
+def _grid(where: FileLocation, t: Mapping) -> np.ndarray:
     """``wavelength_nm`` (number or list) or ``band_nm = [lo, hi]`` with ``step_nm``."""
     if ("wavelength_nm" in t) == ("band_nm" in t):
         raise where.error("give exactly one of wavelength_nm = 550 / [450, 550, 650] or band_nm = [lo, hi] "
@@ -215,12 +280,12 @@ def _grid(where: _Where, t: Mapping) -> np.ndarray:
     lo, hi = band
     if lo <= 0 or not hi > lo:
         raise where.error(f"band inverted or empty: lo {lo:g} nm must be > 0 and < hi {hi:g} nm", "band_nm")
-    step = _number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
+    step = read_number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
     wl = lo + step * np.arange(int(math.floor((hi - lo) / step + 1e-9)) + 1)
     return wl if abs(wl[-1] - hi) <= 1e-9 * hi else np.append(wl, hi)  # both band edges are targets
 
 
-def _per_wavelength(where: _Where, key: str, x, n_wl: int) -> np.ndarray:
+def _per_wavelength(where: FileLocation, key: str, x, n_wl: int) -> np.ndarray:
     v = _numbers(where, key, x, f"one number, or one per wavelength ({n_wl})")
     if v.size not in (1, n_wl):
         raise where.error(f"has {v.size} values for {n_wl} wavelengths", key)
@@ -233,8 +298,8 @@ def _fmt_values(v) -> str:
     return f"{float(v):g}" if np.ndim(v) == 0 else "profile"
 
 
-def _spectral_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
-    _reject_unknown(where, t, _SPECTRAL_KEYS)
+def _spectral_target(where: FileLocation, t: Mapping, name: str) -> DesignTarget:
+    reject_unknown_keys(where, t, _SPECTRAL_KEYS)
     quantity = t.get("quantity", "R")
     if quantity not in _QUANTITY:
         raise where.error(f"must be 'R', 'T' or 'A' (specular reflectance, transmittance, absorptance), "
@@ -244,8 +309,8 @@ def _spectral_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
         raise where.error(f"must be 'natural', 's' or 'p', got {polarization!r}", "polarization")
     wl = _grid(where, t)
     angles = _angles(where, t)
-    tol = _number(where, "tolerance", t.get("tolerance", 0.01), positive=True)
-    weight = _number(where, "weight", t.get("weight", 1.0), positive=True)
+    tol = read_number(where, "tolerance", t.get("tolerance", 0.01), positive=True)
+    weight = read_number(where, "weight", t.get("weight", 1.0), positive=True)
     given = [k for k in ("value", "min", "max") if k in t]
     if not given:
         raise where.error("missing: give value = ... (with tolerance) or min = ... and/or max = ...", "value")
@@ -267,13 +332,13 @@ def _spectral_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
     return DesignTarget(name, tuple(parts), tuple(checks), ", ".join(spec))
 
 
-def _colour_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
-    _reject_unknown(where, t, _COLOUR_KEYS)
+def _colour_target(where: FileLocation, t: Mapping, name: str) -> DesignTarget:
+    reject_unknown_keys(where, t, _COLOUR_KEYS)
     if "lab" not in t:
         raise where.error("missing: the target colour as [L*, a*, b*] (or one triple per angle)", "lab")
     lab = t["lab"]
     rows = lab if isinstance(lab, list) and lab and all(isinstance(r, list) for r in lab) else [lab]
-    if not all(isinstance(r, list) and len(r) == 3 and all(_is_number(x) for x in r) for r in rows):
+    if not all(isinstance(r, list) and len(r) == 3 and all(is_number(x) for x in r) for r in rows):
         raise where.error(f"must be [L*, a*, b*] or a list of such triples (one per angle), got {lab!r}", "lab")
     lab_a = np.asarray(rows, dtype=float)
     if not np.all(np.isfinite(lab_a)) or np.any(lab_a[:, 0] < 0) or np.any(lab_a[:, 0] > 100):
@@ -281,7 +346,7 @@ def _colour_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
     angles = _angles(where, t)
     if lab_a.shape[0] not in (1, angles.size):
         raise where.error(f"{lab_a.shape[0]} Lab triples for {angles.size} angles", "lab")
-    step = _number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
+    step = read_number(where, "step_nm", t.get("step_nm", 5.0), positive=True, what="nm")
     lo, hi = ls.VISIBLE_RANGE_NM
     wl = lo + step * np.arange(int(math.floor((hi - lo) / step + 1e-9)) + 1)
     if abs(wl[-1] - hi) > 1e-9 * hi:
@@ -292,15 +357,15 @@ def _colour_target(where: _Where, t: Mapping, name: str) -> DesignTarget:
         cs = ls.ColourSpace(wl, observer, illuminant)
     except LayerstackError as e:
         raise where.error(str(e), "observer" if "observer" in str(e) else "illuminant") from None
-    tol = _number(where, "tolerance", t.get("tolerance", 1.0), positive=True, what="ΔE2000")
-    weight = _number(where, "weight", t.get("weight", 1.0), positive=True)
+    tol = read_number(where, "tolerance", t.get("tolerance", 1.0), positive=True, what="ΔE2000")
+    weight = read_number(where, "weight", t.get("weight", 1.0), positive=True)
     part = ColourTarget(cs, lab_a if lab_a.shape[0] > 1 else lab_a[0], angles, tolerance=tol, weight=weight)
     return DesignTarget(name, (part,), (part,), f"ΔE2000 <= {tol:g}")
 
 
 def _targets(source: str, d: Mapping) -> tuple:
     raw = d.get("targets")
-    top = _Where(source, "top level")
+    top = FileLocation(source, "top level")
     if raw is None:
         raise top.error("missing: add at least one [[targets]] table (what the design should achieve)", "targets")
     if not isinstance(raw, list) or not raw or not all(isinstance(t, Mapping) for t in raw):
@@ -310,8 +375,8 @@ def _targets(source: str, d: Mapping) -> tuple:
         name = t.get("name", f"target {i + 1}")
         label = f"[[targets]] no. {i + 1}"
         if not isinstance(name, str) or not name:
-            raise _Where(source, label).error(f"must be a non-empty string, got {name!r}", "name")
-        where = _Where(source, f"{label} ({name!r})" if "name" in t else label)
+            raise FileLocation(source, label).error(f"must be a non-empty string, got {name!r}", "name")
+        where = FileLocation(source, f"{label} ({name!r})" if "name" in t else label)
         kind = t.get("type", "spectral")
         if kind == "spectral":
             out.append(_spectral_target(where, t, name))
@@ -325,15 +390,15 @@ def _targets(source: str, d: Mapping) -> tuple:
 def _free_thicknesses(source: str, raw_layers: list, declarations: list, stack: ls.Stack):
     """Indices and bounds of the layers with ``thickness_nm = { ..., free = true }``."""
     for decl in declarations:
-        if decl["kind"] != "thickness":
-            raise LayerstackError(f"{decl['where']}: {decl['name']} is free, but a design optimises layer thicknesses "
+        if decl.kind != "thickness":
+            raise LayerstackError(f"{decl.where}: {decl.name} is free, but a design optimises layer thicknesses "
                                   "only: mark thickness_nm free and give the others plain values")
     free, lower, upper = [], [], []
     for i, t in enumerate(raw_layers):
         spec = t.get("thickness_nm")
         if not (isinstance(spec, Mapping) and spec.get("free") is True):
             continue
-        where = _Where(source, f"[[layers]] no. {i + 1} ({stack.layers[i].name!r})")
+        where = FileLocation(source, f"[[layers]] no. {i + 1} ({stack.layers[i].name!r})")
         lo, hi = float(spec.get("min", 0.0)), float(spec.get("max", _DEFAULT_MAX_NM))
         if lo < 0:
             raise where.error(f"min must be >= 0 nm, got {lo:g}", "thickness_nm")
@@ -352,31 +417,31 @@ def _free_thicknesses(source: str, raw_layers: list, declarations: list, stack: 
 
 
 def _needle(source: str, t, base_dir: Path, stack: ls.Stack, free: tuple, upper: np.ndarray) -> NeedleSettings:
-    where = _Where(source, "[optimizer.needle]")
+    where = FileLocation(source, "[optimizer.needle]")
     if not isinstance(t, Mapping):
-        raise _Where(source, "[optimizer]").error(f"must be a table [optimizer.needle], got {t!r}", "needle")
-    _reject_unknown(where, t, _NEEDLE_KEYS)
+        raise FileLocation(source, "[optimizer]").error(f"must be a table [optimizer.needle], got {t!r}", "needle")
+    reject_unknown_keys(where, t, _NEEDLE_KEYS)
     raw = t.get("materials")
     if not isinstance(raw, list) or not raw or not all(isinstance(m, Mapping) for m in raw):
         raise where.error("must be a non-empty list of materials such as [{ name = \"SiO2\", n = 1.46 }, "
                           "{ name = \"TiO2\", n = { material = \"TiO2\", source = \"Devore-o\" } }]", "materials")
     materials, names, specs = [], [], []
     for i, m in enumerate(raw):
-        mw = _Where(source, f"[optimizer.needle]: materials no. {i + 1}")
-        _reject_unknown(mw, m, ("name", "n", "k"))
-        materials.append(_material(mw, m, base_dir, allow_k=True, label=f"needle material {i + 1}"))
+        mw = FileLocation(source, f"[optimizer.needle]: materials no. {i + 1}")
+        reject_unknown_keys(mw, m, ("name", "n", "k"))
+        materials.append(read_material(mw, m, base_dir, allow_k=True, label=f"needle material {i + 1}"))
         n = m.get("n")
         default = (n.get("material") if isinstance(n, Mapping) and isinstance(n.get("material"), str)
-                   else f"n={n:g}" if _is_number(n) else f"needle material {i + 1}")
+                   else f"n={n:g}" if is_number(n) else f"needle material {i + 1}")
         names.append(_string(mw, "name", m.get("name", default)))
         specs.append({k: m[k] for k in ("n", "k") if k in m})
     for i, layer in enumerate(stack.layers):
         if layer.coherent != (i in free):
             what = "coherent (a thin film) but its thickness is not free" if layer.coherent else "incoherent but free"
-            raise _Where(source, f"[[layers]] no. {i + 1} ({layer.name!r})").error(
+            raise FileLocation(source, f"[[layers]] no. {i + 1} ({layer.name!r})").error(
                 f"is {what}: the needle method refines the thickness of every thin film and only those; mark each "
                 "coherent layer thickness_nm = { value = ..., free = true }", "thickness_nm")
-    max_nm = _number(where, "max_thickness_nm", t.get("max_thickness_nm", float(np.max(upper))), positive=True,
+    max_nm = read_number(where, "max_thickness_nm", t.get("max_thickness_nm", float(np.max(upper))), positive=True,
                      what="nm")
     if max_nm < np.max(upper):
         raise where.error(f"must be >= every free layer's max ({np.max(upper):g} nm): it bounds all films once "
@@ -385,7 +450,7 @@ def _needle(source: str, t, base_dir: Path, stack: ls.Stack, free: tuple, upper:
     return NeedleSettings(
         materials=tuple(materials), names=tuple(names), specs=tuple(specs),
         iterations=_integer(where, "iterations", t.get("iterations", 3), 1),
-        min_thickness_nm=_number(where, "min_thickness_nm", t.get("min_thickness_nm", 0.5), minimum=0.0, what="nm"),
+        min_thickness_nm=read_number(where, "min_thickness_nm", t.get("min_thickness_nm", 0.5), minimum=0.0, what="nm"),
         max_thickness_nm=max_nm,
         max_layers=None if max_layers is None else _integer(where, "max_layers", max_layers, len(stack.layers) + 2),
         points_per_layer=_integer(where, "points_per_layer", t.get("points_per_layer", 32), 1),
@@ -413,8 +478,8 @@ def _check_grids(source: str, stack: ls.Stack, targets: tuple, needle: Optional[
 def _layer_spec(t: Mapping) -> dict:
     """A file's layer table without its thickness and free-parameter keys."""
     def plain(spec):
-        if isinstance(spec, Mapping) and any(k in spec for k in _FREE_KEYS):
-            return spec["value"] if "value" in spec else {k: v for k, v in spec.items() if k not in _FREE_KEYS}
+        if isinstance(spec, Mapping) and any(k in spec for k in FREE_KEYS):
+            return spec["value"] if "value" in spec else {k: v for k, v in spec.items() if k not in FREE_KEYS}
         return spec
 
     return {k: plain(v) for k, v in t.items() if k not in ("thickness_nm", "name")}
@@ -424,22 +489,22 @@ def load_design(path) -> DesignFile:
     """Read a design file (format: :mod:`layerstack_jax.io` docstring, "Design files")."""
     path = Path(path)
     source = str(path)
-    d = _read(path)
+    d = read_toml(path, "design file")
     raw = {k: v for k, v in d.items() if k not in _DESIGN_KEYS}
     declarations: list = []
     stack = stack_from_dict(raw, path.parent, source=source, free=declarations)
     if not isinstance(stack.exit, ls.Substrate):
-        raise _Where(source, "[background]").error(
+        raise FileLocation(source, "[background]").error(
             "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] "
             "is not supported")
     raw_layers = raw.get("layers", [])
     free, lower, upper = _free_thicknesses(source, raw_layers, declarations, stack)
     targets = _targets(source, d)
 
-    top = _Where(source, "top level")
+    top = FileLocation(source, "top level")
     opt = _table(top, d, "optimizer")
-    ow = _Where(source, "[optimizer]")
-    _reject_unknown(ow, opt, _OPTIMIZER_KEYS)
+    ow = FileLocation(source, "[optimizer]")
+    reject_unknown_keys(ow, opt, _OPTIMIZER_KEYS)
     method = opt.get("method", "scipy")
     if method not in ("scipy", "jaxopt"):
         raise ow.error(f"must be 'scipy' (SciPy's L-BFGS-B, starts in turn) or 'jaxopt' (jaxopt's L-BFGS-B, "
@@ -450,17 +515,17 @@ def load_design(path) -> DesignFile:
     robust, optimize_robust, min_yield = None, False, None
     if "robustness" in d:
         rob = _table(top, d, "robustness")
-        rw = _Where(source, "[robustness]")
-        _reject_unknown(rw, rob, _ROBUST_KEYS)
-        sigma = _number(rw, "sigma_nm", rob.get("sigma_nm", 0.0), minimum=0.0, what="nm")
-        rel = _number(rw, "relative", rob.get("relative", 0.0), minimum=0.0, what="fraction of the thickness")
+        rw = FileLocation(source, "[robustness]")
+        reject_unknown_keys(rw, rob, _ROBUST_KEYS)
+        sigma = read_number(rw, "sigma_nm", rob.get("sigma_nm", 0.0), minimum=0.0, what="nm")
+        rel = read_number(rw, "relative", rob.get("relative", 0.0), minimum=0.0, what="fraction of the thickness")
         if sigma == 0 and rel == 0:
             raise rw.error("give the thickness errors: sigma_nm (nm) and/or relative (fraction) > 0", "sigma_nm")
         robust = RobustSpec(sigma, rel, _integer(rw, "samples", rob.get("samples", 200), 1),
                             _integer(rw, "seed", rob.get("seed", 0), 0))
         optimize_robust = _boolean(rw, "optimize", rob.get("optimize", False))
         if "min_yield" in rob:
-            min_yield = _number(rw, "min_yield", rob["min_yield"], minimum=0.0, maximum=1.0, what="fraction")
+            min_yield = read_number(rw, "min_yield", rob["min_yield"], minimum=0.0, maximum=1.0, what="fraction")
 
     keyed = [ls.Layer(layer.index, layer.thickness, coherent=layer.coherent, alpha=layer.alpha, name=f"L{i}")
              for i, layer in enumerate(stack.layers)]
@@ -476,7 +541,7 @@ def load_design(path) -> DesignFile:
         starts=_integer(ow, "starts", opt.get("starts", 1), 1),
         seed=_integer(ow, "seed", opt.get("seed", 0), 0),
         max_steps=_integer(ow, "max_steps", opt.get("max_steps", 500), 1),
-        gradient_tolerance=_number(ow, "gradient_tolerance", opt.get("gradient_tolerance", 1e-9), positive=True),
+        gradient_tolerance=read_number(ow, "gradient_tolerance", opt.get("gradient_tolerance", 1e-9), positive=True),
         needle=needle, robustness=robust, optimize_robust=optimize_robust, min_yield=min_yield,
     )
 

@@ -39,8 +39,11 @@ import numpy as np
 
 from layerstack_jax import Cauchy, Index, LambertianBackground, Layer, LayerstackError, Sellmeier, Stack
 from layerstack_jax._stack import as_spectrum
+from layerstack_jax.io import FreeDeclaration, load_fit_stack
 
 __all__ = [
+    "parameters_from_declarations",
+    "load_fit_parameters",
     "Parameter",
     "thickness",
     "alpha",
@@ -180,6 +183,32 @@ def dispersion(medium: LayerRef, coefficient: str, *, value=None, lower=None, up
 
 
 # --------------------------------------------------------------------------- basis
+def parameters_from_declarations(declarations: Sequence[FreeDeclaration], source: str = "") -> list[Parameter]:
+    """The :class:`Parameter` of each free-parameter annotation of a stack file, by name.
+
+    ``declarations``: the :class:`~layerstack_jax.io.FreeDeclaration` records of
+    :func:`layerstack_jax.io.load_fit_stack` (bounds in the file's units: nm, 1/nm, fraction);
+    ``source``: the file, for the message when there is none. This is the one place where the
+    stack-file annotations become fitting parameters.
+    """
+    params = [
+        Parameter(path=tuple(d.path), kind=d.kind, name=d.name, lower=d.lower, upper=d.upper, basis=d.basis,
+                  per_sample=d.per_sample, smoothness=d.smoothness)
+        for d in declarations
+    ]
+    if not params:
+        raise LayerstackError(f"{source or 'stack file'}: no free parameter: mark some with e.g. "
+                              "thickness_nm = { value = 30000, free = true }")
+    return params
+
+
+def load_fit_parameters(path) -> tuple[Stack, list[Parameter]]:
+    """A stack file with free-parameter annotations → ``(stack, [Parameter])`` (schema:
+    :mod:`layerstack_jax.io`, "Free parameters")."""
+    stack, declarations = load_fit_stack(path)
+    return stack, parameters_from_declarations(declarations, str(path))
+
+
 def bspline_basis(wavelength_nm, n_coefficients: int, degree: int = 3) -> np.ndarray:
     """Clamped B-spline basis on uniform knots spanning the grid, ``(wl, n_coefficients)``.
 

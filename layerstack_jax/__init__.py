@@ -70,6 +70,7 @@ from ._stack import Layer as Layer
 from ._stack import Stack as Stack
 from ._stack import Substrate as Substrate
 from ._stack import TabulatedSpectrum as TabulatedSpectrum
+from ._stack import check_stack as check_stack
 from ._validate import LayerstackError as LayerstackError
 from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack

@@ -197,3 +197,9 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
     )
 
 
+def check_stack(stack: Stack, wavelength_nm) -> None:
+    """Raise :class:`LayerstackError` (naming the field) if ``stack`` cannot be evaluated on
+    ``wavelength_nm`` (nm): a wavelength outside a material table's range, k < 0, ρg outside
+    [0, 1], a negative thickness or α … — the checks every public function makes, run once up
+    front (e.g. before a long batch or a fit)."""
+    resolve(stack, wavelength_nm)

@@ -16,7 +16,7 @@ import pytest
 import tmm
 
 import layerstack_jax as ls
-from layerstack_jax.cli import main
+from layerstack_cli import main
 from layerstack_jax.io import load_stack
 
 INF = np.inf

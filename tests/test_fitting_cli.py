@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax.cli import main
+from layerstack_cli import main
 from layerstack_jax.io import load_fit_stack, load_stack, save_spectra_csv
 
 WL = np.arange(400.0, 701.0, 10.0)
@@ -41,9 +41,17 @@ def test_load_fit_stack_declarations(tmp_path):
     f.write_text(STACK.format(alpha="{ value = 2e-5, free = true, basis = 4 }"))
     stack, free = load_fit_stack(f)
     assert float(stack.layers[0].thickness) == 8000.0
-    assert [d["kind"] for d in free] == ["thickness", "alpha"]
-    assert free[0]["path"] == ("layers", "slab", "thickness") and free[0]["upper"] == 1e5
-    assert free[1]["basis"] == 4
+    assert [d.kind for d in free] == ["thickness", "alpha"]
+    assert free[0].path == ("layers", "slab", "thickness") and free[0].upper == 1e5
+    assert free[1].basis == 4
+    # the one place where annotations become fitting parameters: by name, every field carried
+    import fitting as ft
+
+    _, params = ft.load_fit_parameters(f)
+    assert [(p.path, p.kind, p.name, p.lower, p.upper, p.basis) for p in params] == [
+        (d.path, d.kind, d.name, d.lower, d.upper, d.basis) for d in free
+    ]
+    assert params[1].basis == 4 and params[0].upper == 1e5
     # load_stack reads the same file, values only
     assert float(load_stack(f).layers[0].alpha) == 2e-5
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax.cli import main
+from layerstack_cli import main
 from layerstack_jax.io import (
     load_stack,
     parse_wavelengths,

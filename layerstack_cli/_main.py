@@ -1,0 +1,51 @@
+"""The ``layerstack`` parser and :func:`main`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from layerstack_jax import LayerstackError
+
+from ._common import PROG
+from ._design import _add_design_parser
+from ._fit import _add_fit_parser
+from ._predict import _add_predict_parser
+
+_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser, _add_design_parser)
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    from layerstack_jax import __version__
+
+    parser = argparse.ArgumentParser(prog=PROG, description="Light in layered coatings (layerstack_jax).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def _os_error_message(e: OSError) -> str:
+    if e.filename is not None and e.strerror:
+        return f"{e.filename}: {e.strerror}"
+    return str(e)
+
+
+def main(argv=None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); returns the exit status
+    (0 success, 2 usage or input error) instead of exiting, so it can be called in-process."""
+    parser = _build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse usage errors (status 2), --help / --version (0)
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    try:
+        return args.func(args)
+    except LayerstackError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+    except OSError as e:
+        print(f"{PROG}: error: {_os_error_message(e)}", file=sys.stderr)
+    return 2
+
+

@@ -1,0 +1,564 @@
+r"""Stack files: the TOML schema of a :class:`~layerstack_jax.Stack` (documented in
+:mod:`layerstack_jax.io`), read by :func:`load_stack` / :func:`stack_from_dict`, written by
+:func:`save_stack` / :func:`stack_to_dict`. This module is the schema's one owner: the free-
+parameter annotations (``{ value = ..., free = true, min = ..., max = ... }``) are parsed here
+into typed :class:`FreeDeclaration` records, which :mod:`fitting` turns into its ``Parameter``
+objects by name.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Mapping, NamedTuple, Optional
+
+import numpy as np
+
+from ._file_grammar import (FileLocation, check_grid, check_range, is_number, read_number, read_number_list,
+                            read_toml, reject_unknown_keys)
+from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
+from ._spectra_csv import read_csv_columns
+from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
+from ._validate import LayerstackError, is_concrete
+
+__all__ = ["FREE_KEYS", "FreeDeclaration", "read_material", "stack_from_dict", "load_stack", "load_fit_stack",
+           "stack_to_dict", "save_stack"]
+
+_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background")
+_LAYER_KEYS = ("name", "n", "k", "thickness_nm", "coherent", "alpha_per_nm")
+_SUBSTRATE_KEYS = ("n", "k")
+_BACKGROUND_KEYS = ("n", "rho_g")
+_AMBIENT_KEYS = ("n",)
+_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material")
+
+
+def _read_table(where: FileLocation, key: str, base_dir: Path, filename, required, optional=()) -> tuple[Path, dict]:
+    if not isinstance(filename, str) or not filename:
+        raise where.error(f"table must be a file name (string), got {filename!r}", key)
+    path = Path(filename)
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise where.error(f"table file {filename!r} not found (looked for {path})", key)
+    try:
+        cols = read_csv_columns(path, required, optional)
+    except LayerstackError as e:
+        raise where.error(f"bad table: {e}", key) from None
+    return path, cols
+
+
+
+# --------------------------------------------------------------------------- materials
+def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_k: bool, label: str) -> Material:
+    """The material of a table with an ``n`` key (and optionally ``k``)."""
+    if "n" not in table:
+        raise where.error("missing (refractive index: a number or a dispersion table)", "n")
+    spec = table["n"]
+    k_given = "k" in table
+    if k_given and not allow_k:
+        raise where.error("not allowed here: this medium must be transparent (real index, no k)", "k")
+    k = read_number(where, "k", table["k"], minimum=0.0, what="extinction coefficient") if k_given else 0.0
+
+    if is_number(spec):
+        return Index(read_number(where, "n", spec, positive=True, what="refractive index"), k)
+    if not isinstance(spec, dict):
+        raise where.error(f"must be a number or an inline table such as {{ cauchy = [A, B] }}, got {spec!r}", "n")
+
+    inline_keys = ("wavelength_nm", "n", "k")
+    if "wavelength_nm" in spec:
+        reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n'"), spec, inline_keys)
+        wl = read_number_list(where, "n", spec["wavelength_nm"], "wavelength_nm")
+        if "n" not in spec:
+            raise where.error("inline table needs 'n' (and optionally 'k') lists next to 'wavelength_nm'", "n")
+        nn = read_number_list(where, "n", spec["n"], "n")
+        kk = read_number_list(where, "n", spec["k"], "k") if "k" in spec else None
+        return _tabulated(where, wl, nn, kk, k_given, k, allow_k, f"{label} (inline table)")
+
+    chosen = [name for name in spec if name in _DISPERSION_KEYS]
+    extra = ("source", "shelf") if "material" in spec else ()
+    reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n'"), spec, _DISPERSION_KEYS + extra)
+    if len(chosen) != 1:
+        raise where.error(
+            "give exactly one of cauchy = [...], sellmeier = {B=[...], C=[...]}, table = \"file.csv\", "
+            f"material = \"name\" or an inline wavelength_nm/n/k table; got {spec!r}",
+            "n",
+        )
+    kind = chosen[0]
+    value = spec[kind]
+    if kind == "material":
+        return _database_material(where, spec, k_given, allow_k)
+    if kind == "cauchy":
+        coef = read_number_list(where, "n", value, "cauchy coefficients [A, B, C]")
+        if coef.size > 3:
+            raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {coef.size}", "n")
+        if coef[0] <= 0:
+            raise where.error(f"cauchy A must be > 0, got {coef[0]:g}", "n")
+        A, B, C = (list(coef) + [0.0, 0.0])[:3]
+        return Cauchy(A, B, C, k)
+    if kind == "sellmeier":
+        if not isinstance(value, dict):
+            raise where.error(f"sellmeier must be an inline table {{ B = [...], C = [...] }}, got {value!r}", "n")
+        reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n': sellmeier"), value, ("B", "C"))
+        if "B" not in value or "C" not in value:
+            raise where.error("sellmeier needs both B = [...] and C = [...] (C in µm²)", "n")
+        B = read_number_list(where, "n", value["B"], "sellmeier B")
+        C = read_number_list(where, "n", value["C"], "sellmeier C")
+        if B.shape != C.shape:
+            raise where.error(f"sellmeier B and C must have the same length, got {B.size} and {C.size}", "n")
+        return Sellmeier(B, C, k)
+    # table
+    path, cols = _read_table(where, "n", base_dir, value, ("wavelength_nm", "n"), ("k",))
+    return _tabulated(where, cols["wavelength_nm"], cols["n"], cols.get("k"), k_given, k, allow_k,
+                      f"{path.name} ({label})", file=str(value))
+
+
+def _database_material(where: FileLocation, spec: Mapping, k_given: bool, allow_k: bool) -> Material:
+    """``n = { material = "Au", source = "Johnson", shelf = "main" }``: the refractiveindex.info
+    database (n and k from the same page; no separate ``k`` key)."""
+    from ._database import material
+
+    for key in ("material", "source", "shelf"):
+        if key in spec and not isinstance(spec[key], str):
+            raise where.error(f"{key} must be a string, got {spec[key]!r}", "n")
+    if k_given:
+        raise where.error("k comes from the material database with n = { material = ... }; remove the k key", "k")
+    try:
+        m = material(spec["material"], spec.get("source"), shelf=spec.get("shelf"))
+    except LayerstackError as e:
+        raise where.error(str(e), "n") from None
+    k_table = getattr(m, "k", None)
+    if not allow_k and k_table is not None and np.any(np.asarray(k_table) != 0):
+        raise where.error(f"{m.name} absorbs (k > 0 in the database), but this medium must be transparent", "n")
+    return m
+
+
+def _tabulated(where, wl, n, k_col, k_given, k, allow_k, name, file=None) -> Tabulated:
+    what = f"table {file!r}" if file else "inline table"
+    check_grid(where, "n", wl, what)
+    for col, v in (("n", n), ("k", k_col)):
+        if v is not None and v.shape != wl.shape:
+            raise where.error(f"{what}: column {col} has {v.size} values for {wl.size} wavelengths", "n")
+    check_range(where, "n", n, f"{what}: column n", lo=np.finfo(float).tiny)
+    if k_col is not None:
+        if k_given:
+            raise where.error(f"k is given both as a key and as a column of the {what}; keep one", "k")
+        check_range(where, "n", k_col, f"{what}: column k", lo=0.0)
+        if not allow_k and np.any(k_col != 0):
+            raise where.error(f"{what}: this medium must be transparent (k = 0)", "n")
+    elif k_given:
+        k_col = np.full_like(wl, k)
+    return Tabulated(wl, n, k_col, name=name)
+
+
+def _spectrum(where: FileLocation, key: str, spec, base_dir: Path, column: str, label: str, *, lo, hi):
+    """A number or a tabulated spectrum (file or inline) for ``alpha_per_nm`` or ``rho_g``."""
+    if is_number(spec):
+        return read_number(where, key, spec, minimum=lo, maximum=hi)
+    if not isinstance(spec, dict):
+        raise where.error(
+            f"must be a number, {{ table = \"file.csv\" }} or {{ wavelength_nm = [...], values = [...] }}, got {spec!r}",
+            key,
+        )
+    if "table" in spec:
+        reject_unknown_keys(FileLocation(where.source, f"{where.table}: key {key!r}"), spec, ("table",))
+        path, cols = _read_table(where, key, base_dir, spec["table"], ("wavelength_nm", column))
+        wl, values, what, name = cols["wavelength_nm"], cols[column], f"table {spec['table']!r}", f"{path.name} ({label})"
+    else:
+        reject_unknown_keys(FileLocation(where.source, f"{where.table}: key {key!r}"), spec, ("wavelength_nm", "values", "table"))
+        if "wavelength_nm" not in spec or "values" not in spec:
+            raise where.error("give { table = \"file.csv\" } or both wavelength_nm = [...] and values = [...]", key)
+        wl = read_number_list(where, key, spec["wavelength_nm"], "wavelength_nm")
+        values = read_number_list(where, key, spec["values"], "values")
+        what, name = "inline table", f"{label} (inline table)"
+        if values.shape != wl.shape:
+            raise where.error(f"{what}: {values.size} values for {wl.size} wavelengths", key)
+    check_grid(where, key, wl, what)
+    check_range(where, key, values, what, lo=lo, hi=hi)
+    return TabulatedSpectrum(wl, values, name=name)
+
+
+FREE_KEYS = ("value", "free", "min", "max", "basis", "per_sample", "smoothness")
+
+
+class FreeDeclaration(NamedTuple):
+    """One free-parameter annotation of a stack file, as written there (schema: :mod:`layerstack_jax.io`).
+
+    Attributes:
+        path: where the value lives in the stack, layers by name: ``("layers", "varnish",
+            "thickness")``, ``("layers", "varnish", "alpha")``, ``("layers", name, "index", "n")``,
+            ``("exit", "reflectance")``.
+        kind: ``"thickness"`` (nm), ``"alpha"`` (1/nm), ``"rho_g"`` (fraction), ``"n"`` or
+            ``"coefficient"`` (the extinction coefficient k).
+        name: a display name such as ``"thickness_nm[varnish]"``.
+        lower, upper: the bounds written in the file, in the parameter's file unit (None: the
+            fitting default of that kind).
+        basis: spectra only: number of B-spline functions, ``"free"`` (one value per
+            wavelength) or None (one value).
+        per_sample: one value per spectrum in a joint fit.
+        smoothness: weight of the smoothness penalty of a spectrum (≥ 0).
+        where: ``"<file>: <table>"`` for messages.
+    """
+
+    path: tuple
+    kind: str
+    name: str
+    lower: Optional[float]
+    upper: Optional[float]
+    basis: object
+    per_sample: bool
+    smoothness: float
+    where: str
+
+
+def _split_free(where: FileLocation, key: str, spec, path: tuple, kind: str, free: Optional[list], *, spectral: bool):
+    """Strip the free-parameter keys of ``spec`` (module docstring), record the declaration in
+    ``free`` (when a list) and return the plain value spec."""
+    if not isinstance(spec, dict) or not any(k in spec for k in FREE_KEYS):
+        return spec
+    decl = {k: spec[k] for k in FREE_KEYS if k in spec}
+    rest = {k: v for k, v in spec.items() if k not in FREE_KEYS}
+    if "value" in decl:
+        if rest:
+            raise where.error(f"give either value = ... or {', '.join(rest)}, not both", key)
+        plain = decl.pop("value")
+        if not is_number(plain):
+            raise where.error(f"value must be a number, got {plain!r}", key)
+    elif rest and spectral:
+        plain = rest
+    else:
+        raise where.error("missing value = <number> next to free/min/max", key)
+    is_free = decl.get("free", False)
+    if not isinstance(is_free, bool):
+        raise where.error(f"free must be true or false, got {is_free!r}", key)
+    bounds = {}
+    for b in ("min", "max"):
+        if b in decl:
+            v = decl[b]
+            if not is_number(v) or math.isnan(float(v)):
+                raise where.error(f"{b} must be a number, got {v!r}", key)
+            bounds[b] = float(v)
+    if "min" in bounds and "max" in bounds and not bounds["min"] < bounds["max"]:
+        raise where.error(f"bounds inverted: min {bounds['min']:g} must be < max {bounds['max']:g}", key)
+    basis = decl.get("basis")
+    if basis is not None:
+        if not spectral:
+            raise where.error("basis is for spectra (alpha_per_nm, rho_g) only", key)
+        if not (basis == "free" or (isinstance(basis, int) and not isinstance(basis, bool) and basis >= 1)):
+            raise where.error(f"basis must be a number of B-spline functions >= 1 or \"free\", got {basis!r}", key)
+    per_sample = decl.get("per_sample", False)
+    if not isinstance(per_sample, bool):
+        raise where.error(f"per_sample must be true or false, got {per_sample!r}", key)
+    smooth = decl.get("smoothness", 0.0)
+    if not is_number(smooth) or smooth < 0:
+        raise where.error(f"smoothness must be a number >= 0, got {smooth!r}", key)
+    extra = [k for k in ("min", "max", "basis", "per_sample", "smoothness") if k in decl]
+    if extra and not is_free:
+        raise where.error(f"{', '.join(extra)} given but free is not true", key)
+    if is_free and free is not None:
+        free.append(FreeDeclaration(path=path, kind=kind, name=f"{key}[{path[1]}]" if path[0] == "layers" else key,
+                                    lower=bounds.get("min"), upper=bounds.get("max"), basis=basis,
+                                    per_sample=per_sample, smoothness=float(smooth),
+                                    where=f"{where.source}: {where.table}"))
+    return plain
+
+
+def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index: int = 0, free: Optional[list] = None) -> Layer:
+    reject_unknown_keys(where, table, _LAYER_KEYS)
+    if "thickness_nm" not in table:
+        raise where.error("missing (layer thickness in nm)", "thickness_nm")
+    table = dict(table)
+    spec = _split_free(where, "thickness_nm", table["thickness_nm"], ("layers", name, "thickness"), "thickness", free,
+                       spectral=False)
+    thickness = read_number(where, "thickness_nm", spec, minimum=0.0, what="nm")
+    for key, field, kind in (("n", "n", "n"), ("k", "k", "coefficient")):
+        if key in table and isinstance(table[key], dict) and any(k in table[key] for k in FREE_KEYS):
+            table[key] = _split_free(where, key, table[key], ("layers", name, "index", field), kind, free, spectral=False)
+    if "coherent" not in table:
+        raise where.error(
+            "missing: say coherent = true for a thin film (interference) or false for a thick layer "
+            "(thicker than the coherence length, ~ a few µm)",
+            "coherent",
+        )
+    coherent = table["coherent"]
+    if not isinstance(coherent, bool):
+        raise where.error(f"must be true or false, got {coherent!r}", "coherent")
+    index = read_material(where, table, base_dir, allow_k=True, label=f"layer {name!r} n")
+    alpha = None
+    if "alpha_per_nm" in table:
+        if coherent:
+            raise where.error(
+                "is only for incoherent layers (coherent = false); give a coherent film an extinction coefficient k",
+                "alpha_per_nm",
+            )
+        spec = _split_free(where, "alpha_per_nm", table["alpha_per_nm"], ("layers", name, "alpha"), "alpha", free,
+                           spectral=True)
+        alpha = _spectrum(where, "alpha_per_nm", spec, base_dir, "alpha_per_nm",
+                          f"layer {name!r} alpha", lo=0.0, hi=None)
+    return Layer(index, thickness, coherent=coherent, alpha=alpha, name=name)
+
+
+# ------------------------------------------------------------------------------ stacks
+def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", free: Optional[list] = None) -> Stack:
+    """Build a :class:`Stack` from the parsed contents of a stack file (schema: module docstring).
+
+    Args:
+        d: the dict (as from ``tomllib``).
+        base_dir: directory against which relative table file names are resolved.
+        source: name used in error messages (the file name when called by :func:`load_stack`).
+        free: if a list, the free-parameter declarations found are appended to it as
+            :class:`FreeDeclaration` records (layers named in their paths).
+
+    Units are those of the file: ``thickness_nm`` in nm, ``alpha_per_nm`` in 1/nm, ``rho_g`` a
+    fraction in [0, 1]. Numbers stay scalars; tables become :class:`Tabulated` /
+    :class:`TabulatedSpectrum` leaves of shape ``(table,)``, so the stack can be evaluated on
+    any grid ``(wl,)`` inside the tables' range.
+    """
+    base_dir = Path(base_dir)
+    top = FileLocation(source, "top level")
+    if not isinstance(d, Mapping):
+        raise top.error(f"expected a table of keys, got {type(d).__name__}")
+    reject_unknown_keys(top, d, _TOP_KEYS)
+    if "description" in d and not isinstance(d["description"], str):
+        raise top.error("must be a string", "description")
+
+    def _table(key):
+        t = d[key]
+        if not isinstance(t, Mapping):
+            raise top.error(f"must be a table [{key}], got {t!r}", key)
+        return t
+
+    try:
+        if "ambient" in d:
+            where = FileLocation(source, "[ambient]")
+            amb = _table("ambient")
+            reject_unknown_keys(where, amb, _AMBIENT_KEYS + ("k",))
+            ambient = read_material(where, amb, base_dir, allow_k=False, label="ambient n")
+        else:
+            ambient = Index(1.0)
+
+        raw_layers = d.get("layers", [])
+        if not isinstance(raw_layers, list) or not all(isinstance(t, Mapping) for t in raw_layers):
+            raise top.error("must be an array of tables, written [[layers]]", "layers")
+        layers = []
+        for i, t in enumerate(raw_layers):
+            name = t.get("name", f"layer {i + 1}")
+            label = f"[[layers]] no. {i + 1}"
+            if not isinstance(name, str) or not name:
+                raise FileLocation(source, label).error(f"must be a non-empty string, got {name!r}", "name")
+            layers.append(_layer(FileLocation(source, f"{label} ({name!r})"), t, base_dir, name, i, free))
+
+        has_sub, has_bg = "substrate" in d, "background" in d
+        if has_sub and has_bg:
+            raise top.error("give either [substrate] (specular) or [background] (Lambertian), not both")
+        if not (has_sub or has_bg):
+            raise top.error("missing the exit medium: add a [substrate] (specular) or a [background] (Lambertian) table")
+        if has_sub:
+            where = FileLocation(source, "[substrate]")
+            sub = _table("substrate")
+            reject_unknown_keys(where, sub, _SUBSTRATE_KEYS)
+            exit_ = Substrate(read_material(where, sub, base_dir, allow_k=True, label="substrate n"))
+        else:
+            where = FileLocation(source, "[background]")
+            bg = _table("background")
+            reject_unknown_keys(where, bg, _BACKGROUND_KEYS + ("k",))
+            index = read_material(where, bg, base_dir, allow_k=False, label="background n")
+            if "rho_g" not in bg:
+                raise where.error("missing (intrinsic reflectance of the background, in [0, 1])", "rho_g")
+            spec = _split_free(where, "rho_g", bg["rho_g"], ("exit", "reflectance"), "rho_g", free, spectral=True)
+            rho = _spectrum(where, "rho_g", spec, base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
+            exit_ = LambertianBackground(index, rho)
+        return Stack(ambient=ambient, layers=layers, exit=exit_)
+    except LayerstackError as e:
+        msg = str(e)
+        if msg.startswith(f"{source}:"):
+            raise
+        raise LayerstackError(f"{source}: {msg}") from None
+
+
+
+def load_fit_stack(path) -> tuple[Stack, list[FreeDeclaration]]:
+    """Read a stack file and its free-parameter declarations (module docstring, "Free
+    parameters"): returns ``(stack, declarations)``, a list of :class:`FreeDeclaration`
+    (:func:`fitting.parameters_from_declarations` makes ``fitting.Parameter`` objects of them). Bounds are in the parameter's file unit (nm for
+    ``thickness_nm``, 1/nm for ``alpha_per_nm``, a fraction in [0, 1] for ``rho_g``); the stack is
+    as from :func:`load_stack` (scalars, or tables of shape ``(table,)``)."""
+    path = Path(path)
+    free: list = []
+    stack = stack_from_dict(read_toml(path), path.parent, source=str(path), free=free)
+    return stack, free
+
+
+def load_stack(path) -> Stack:
+    """Read a stack file (TOML, schema in the module docstring). Relative table file names are
+    resolved against the file's directory. Raises :class:`LayerstackError` naming the file and
+    the offending table/key for any problem. Units and shapes as in :func:`stack_from_dict`
+    (thicknesses in nm, α in 1/nm; tables become leaves of shape ``(table,)``)."""
+    path = Path(path)
+    return stack_from_dict(read_toml(path), path.parent, source=str(path))
+
+
+def _scalar(x, what: str) -> float:
+    if not is_concrete(x) or np.ndim(x) != 0:
+        raise LayerstackError(f"stack_to_dict: {what} must be a concrete scalar, got {x!r}")
+    return float(np.asarray(x))
+
+
+def _material_to_dict(m: Material, what: str, out: dict) -> None:
+    if isinstance(m, Index):
+        if np.ndim(m.n) or np.ndim(m.k):
+            raise LayerstackError(f"stack_to_dict: {what} is sampled on a wavelength grid; use a Tabulated material")
+        out["n"] = _scalar(m.n, f"{what} n")
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Cauchy):
+        out["n"] = {"cauchy": [_scalar(m.A, f"{what} A"), _scalar(m.B, f"{what} B"), _scalar(m.C, f"{what} C")]}
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Sellmeier):
+        out["n"] = {"sellmeier": {"B": np.atleast_1d(np.asarray(m.B, float)).tolist(),
+                                  "C": np.atleast_1d(np.asarray(m.C, float)).tolist()}}
+        k = _scalar(m.k, f"{what} k")
+    elif isinstance(m, Tabulated):
+        table = {"wavelength_nm": list(m.wavelength_nm), "n": np.asarray(m.n, float).tolist()}
+        if m.k is not None:
+            table["k"] = np.asarray(m.k, float).tolist()
+        out["n"] = table
+        k = 0.0
+    else:
+        raise LayerstackError(f"stack_to_dict: cannot write {what} of type {type(m).__name__}")
+    if k != 0.0:
+        out["k"] = k
+
+
+def _spectrum_to_dict(x, what: str):
+    if isinstance(x, TabulatedSpectrum):
+        return {"wavelength_nm": list(x.wavelength_nm), "values": np.asarray(x.values, float).tolist()}
+    if callable(x) or np.ndim(x):
+        raise LayerstackError(f"stack_to_dict: {what} must be a scalar or a TabulatedSpectrum")
+    return _scalar(x, what)
+
+
+def stack_to_dict(stack: Stack) -> dict:
+    """The inverse of :func:`stack_from_dict`: a dict in the stack-file schema, tables inline.
+
+    Works for stacks made of scalars, :class:`Index` (scalar), :class:`Cauchy`,
+    :class:`Sellmeier`, :class:`Tabulated` and :class:`TabulatedSpectrum`; raises
+    :class:`LayerstackError` for arrays sampled on a grid or traced values.
+    """
+    d: dict = {"ambient": {}}
+    _material_to_dict(stack.ambient, "ambient", d["ambient"])
+    layers = []
+    for i, layer in enumerate(stack.layers):
+        t: dict = {"name": layer.name or f"layer {i + 1}"}
+        _material_to_dict(layer.index, f"layer {i + 1}", t)
+        t["thickness_nm"] = _scalar(layer.thickness, f"layer {i + 1} thickness")
+        t["coherent"] = bool(layer.coherent)
+        if layer.alpha is not None:
+            t["alpha_per_nm"] = _spectrum_to_dict(layer.alpha, f"layer {i + 1} alpha")
+        layers.append(t)
+    d["layers"] = layers
+    if isinstance(stack.exit, Substrate):
+        d["substrate"] = {}
+        _material_to_dict(stack.exit.index, "substrate", d["substrate"])
+    else:
+        d["background"] = {}
+        _material_to_dict(stack.exit.index, "background", d["background"])
+        d["background"]["rho_g"] = _spectrum_to_dict(stack.exit.reflectance, "background rho_g")
+    return d
+
+
+# --------------------------------------------------------------------------- TOML writer
+_BARE_KEY = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-")
+
+
+def _toml_key(key) -> str:
+    key = str(key)
+    return key if key and set(key) <= _BARE_KEY else _toml_string(key)
+
+
+def _toml_string(text: str) -> str:
+    escapes = {'"': '\\"', "\\": "\\\\", "\n": "\\n", "\t": "\\t", "\r": "\\r", "\b": "\\b", "\f": "\\f"}
+    out = []
+    for c in text:
+        if c in escapes:
+            out.append(escapes[c])
+        elif ord(c) < 0x20 or ord(c) == 0x7F:
+            out.append(f"\\u{ord(c):04X}")
+        else:
+            out.append(c)
+    return '"' + "".join(out) + '"'
+
+
+def _toml_value(x, what: str) -> str:
+    """One TOML value (inline: strings, booleans, finite numbers, arrays, inline tables)."""
+    if isinstance(x, (bool, np.bool_)):
+        return "true" if x else "false"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        if not math.isfinite(v):
+            raise LayerstackError(f"save_stack: {what} is not finite ({v!r})")
+        return repr(v)  # shortest round-trip representation
+    if isinstance(x, str):
+        return _toml_string(x)
+    if isinstance(x, np.ndarray):
+        x = x.tolist()
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v, what) for v in x) + "]"
+    if isinstance(x, Mapping):
+        if not x:
+            return "{}"
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in x.items()) + " }"
+    raise LayerstackError(f"save_stack: cannot write {what} of type {type(x).__name__}")
+
+
+def _toml_table(d: Mapping, what: str) -> list[str]:
+    return [f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in d.items()]
+
+
+def _dumps_stack(d: Mapping, header: str = "") -> str:
+    """A stack dict (schema in the module docstring, e.g. from :func:`stack_to_dict`) as TOML
+    text, ``header`` written first as ``#`` comment lines."""
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    if lines:
+        lines.append("")
+    for key, value in d.items():
+        if not isinstance(value, (Mapping, list)) or (isinstance(value, list) and key != "layers"):
+            lines.append(f"{_toml_key(key)} = {_toml_value(value, key)}")
+    for key in ("ambient", "layers", "substrate", "background"):
+        if key not in d:
+            continue
+        if key == "layers":
+            for layer in d["layers"]:
+                lines += ["", "[[layers]]", *_toml_table(layer, "layers")]
+        else:
+            lines += ["", f"[{key}]", *_toml_table(d[key], key)]
+    return "\n".join(lines) + "\n"
+
+
+def save_stack(path, stack, *, header: str = "") -> Path:
+    """Write a stack file (TOML) readable by :func:`load_stack`.
+
+    Args:
+        path: output file; missing parent directories are created.
+        stack: a :class:`Stack` (converted by :func:`stack_to_dict`: materials inline) or a dict
+            in the stack-file schema (kept as given, e.g. ``{ material = "Au" }`` references;
+            relative table file names must then be valid from the output's directory).
+        header: free text written first as ``#`` comment lines.
+    Returns the path written.
+
+    Units as in the stack-file schema (``thickness_nm`` in nm, ``alpha_per_nm`` in 1/nm). A
+    :class:`Stack`'s leaves must be scalars or tables with their own wavelengths
+    (:class:`Tabulated`, :class:`TabulatedSpectrum`, shape ``(table,)``): arrays sampled on a
+    model grid or traced values raise :class:`LayerstackError` (see :func:`stack_to_dict`).
+    """
+    d = stack_to_dict(stack) if isinstance(stack, Stack) else stack
+    if not isinstance(d, Mapping):
+        raise LayerstackError(f"save_stack: expected a Stack or a dict, got {type(stack).__name__}")
+    text = _dumps_stack(d, header)
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+

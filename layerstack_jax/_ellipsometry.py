@@ -1,37 +1,50 @@
-r"""Ellipsometry of coherent stacks: :math:`\rho = r_p/r_s = \tan\psi\, e^{i\Delta}`.
+r"""Ellipsometry of coherent stacks: ψ and Δ as ellipsometers report them.
 
 An ellipsometer measures the change of polarization state on specular reflection, i.e. the
 ratio of the complex amplitude reflection coefficients of the stack for p and s light,
 
 .. math::
-    \rho(\lambda, \theta_0) = \frac{r_p}{r_s} = \tan\psi\; e^{i\Delta},
+    \rho(\lambda, \theta_0) = \frac{r_p}{r_s} = \tan\psi\; e^{-i\Delta},
 
 with :math:`r_s, r_p` the composite amplitudes :math:`\gamma` of the Rouard recursion
 (Hirayama et al. eqs. 1–4; :func:`layerstack_jax._coherent.packet_amplitudes`).
 
-Conventions (the package's, see :mod:`layerstack_jax._fresnel`)
------------------------------------------------------------------
+Conventions (the package's physics, see :mod:`layerstack_jax._fresnel`)
+-----------------------------------------------------------------------
 * Time dependence :math:`e^{-i\omega t}`, index :math:`n + ik` with :math:`k \ge 0`.
 * Amplitudes as in Born & Wolf and ``tmm``: :math:`r_s = (q_i - q_f)/(q_i + q_f)`,
   :math:`r_p = (n_f^2 q_i - n_i^2 q_f)/(n_f^2 q_i + n_i^2 q_f)`; at normal incidence
-  :math:`r_p = -r_s`, so :math:`\Delta = 180°` there for any stack. For a lossless dielectric
-  substrate :math:`\Delta = 180°` below Brewster's angle and :math:`0°` above it, and
-  :math:`\psi = 45°` at normal incidence, 0 at Brewster's angle (Fujiwara's textbook
-  values).
-* :math:`\psi \in [0°, 90°]`; :math:`\Delta = \arg\rho \in (-180°, 180°]` (a real negative
-  :math:`\rho` gives +180°, never −180°).
-* ``tmm.ellips`` returns :math:`\psi` identical and :math:`\Delta_\text{tmm} = \arg(-\rho)`, i.e.
-  :math:`\Delta_\text{tmm} = \Delta - 180°` (wrapped into (−180°, 180°]).
-* Texts that use :math:`e^{+j\omega t}` with :math:`N = n - jk` (Azzam & Bashara) and the same
-  field-direction conventions obtain the complex conjugate :math:`\bar\rho`, i.e. the same
-  :math:`\psi` and :math:`-\Delta`. Over an absorbing substrate our :math:`\Delta` lies in
-  (−180°, 0°] (their (0°, 180°]); check which one your instrument reports.
+  :math:`r_p = -r_s`.
+
+The reported Δ: the instruments' convention
+--------------------------------------------
+Ellipsometers (J. A. Woollam, Sentech SpectraRay, Accurion) and the peer codes pyElli and
+refellips report :math:`\Delta = -\arg(r_p/r_s)` in the physics above — equivalently
+:math:`\tan\psi\, e^{i\Delta} = r_p/r_s` written with :math:`e^{+i\omega t}` and
+:math:`n - ik` (the "Nebraska" convention of Azzam & Bashara and Fujiwara). So does this
+module:
+
+* :math:`\Delta = -\arg(r_p/r_s)`, reported in (−180°, 180°] (a real negative :math:`\rho`
+  gives +180°, never −180°); add 360° to negative values for an instrument's [0°, 360°) file.
+  :math:`\psi = \arctan|r_p/r_s| \in [0°, 90°]`.
+* Over an absorbing substrate :math:`\Delta \in (0°, 180°)`: bare or thinly oxidized silicon at
+  70° reads :math:`\Delta \approx 100°`–170° in the visible, as a Woollam or Sentech file does
+  (tests/test_ellipsometry.py checks a measured SiO2/Si file; the opposite sign misses it by
+  ~50° rms).
+* Lossless dielectric substrate: :math:`\Delta = 180°` below Brewster's angle, 0° above,
+  :math:`\psi = 45°` at normal incidence, 0° at Brewster's angle (Fujiwara's textbook values).
+* ``tmm.ellips`` returns the same ψ and :math:`\Delta_\text{tmm} = \arg(-r_p/r_s)`, so
+  :math:`\Delta = 180° - \Delta_\text{tmm}` (wrapped into (−180°, 180°]).
+* :attr:`Ellipsometry.rho` stays the physical ratio :math:`r_p/r_s = \tan\psi\,e^{-i\Delta}`
+  (pyElli's ``Result.rho`` is the same number); the instruments' complex ratio
+  :math:`\tan\psi\,e^{i\Delta}` is its complex conjugate.
 
 For fitting, the wrap-free combinations :math:`N = \cos 2\psi`,
 :math:`C = \sin 2\psi\cos\Delta`, :math:`S = \sin 2\psi \sin\Delta` (what rotating-compensator
-instruments measure; the Mueller matrix of the reflection is
-:math:`m_{00}\,[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`, see
-:mod:`layerstack_jax._polarimetry`) are smooth everywhere, where Δ jumps at ±180°.
+instruments measure, with the same Δ) are smooth everywhere, where Δ jumps at ±180°. The
+normalized Mueller matrix of the reflection is
+:math:`[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`, as measured
+(:mod:`layerstack_jax._polarimetry`).
 """
 
 from __future__ import annotations
@@ -56,8 +69,10 @@ class Ellipsometry(NamedTuple):
 
     Attributes:
         psi_deg: :math:`\psi` in degrees, in [0, 90].
-        delta_deg: :math:`\Delta` in degrees, in (−180, 180] (convention: module docstring).
-        rho: complex :math:`\rho = r_p/r_s = \tan\psi\, e^{i\Delta}`.
+        delta_deg: :math:`\Delta = -\arg(r_p/r_s)` in degrees, in (−180, 180]: the sign
+            ellipsometers report (module docstring).
+        rho: complex :math:`\rho = r_p/r_s = \tan\psi\, e^{-i\Delta}` (physics convention
+            :math:`e^{-i\omega t}`, as pyElli's ``Result.rho``).
     """
 
     psi_deg: Float[Array, "*angle wl"]
@@ -96,15 +111,16 @@ def _safe_abs(z):
 def psi_delta(r_s, r_p):
     r""":math:`(\psi, \Delta)` in radians from the amplitude reflection coefficients.
 
-    :math:`\psi = \operatorname{atan2}(|r_p|, |r_s|)`, :math:`\Delta = \arg(r_p \bar r_s)`; both
-    are NaN-free with finite gradients also at Brewster's angle (:math:`r_p = 0`).
+    :math:`\psi = \operatorname{atan2}(|r_p|, |r_s|)`, :math:`\Delta = \arg(r_s \bar r_p)
+    = -\arg(r_p/r_s)` (the instruments' sign, module docstring); both are NaN-free with
+    finite gradients also at Brewster's angle (:math:`r_p = 0`).
 
-    ``r_s``, ``r_p``: complex amplitude coefficients (dimensionless), broadcast against each
-    other to ``(*B)`` (e.g. ``(*angle, wl)``). Returns ``(psi, delta)``, each ``(*B)``, in
-    radians: ψ in [0, π/2], Δ in (−π, π].
+    ``r_s``, ``r_p``: complex amplitude coefficients (dimensionless, convention
+    :math:`e^{-i\omega t}`), broadcast against each other to ``(*B)`` (e.g. ``(*angle, wl)``).
+    Returns ``(psi, delta)``, each ``(*B)``, in radians: ψ in [0, π/2], Δ in (−π, π].
     """
     psi = _safe_atan2(_safe_abs(r_p), _safe_abs(r_s))
-    c = r_p * jnp.conj(r_s)
+    c = r_s * jnp.conj(r_p)  # arg = -arg(r_p / r_s): the sign ellipsometers report
     delta = _safe_atan2(jnp.imag(c), jnp.real(c))
     # atan2(-0.0, x < 0) = -pi: a real negative rho must give +pi (range (-pi, pi]).
     delta = jnp.where(delta <= -jnp.pi, jnp.pi, delta)
@@ -167,8 +183,9 @@ def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsomet
         angle_deg: angle of incidence, degrees in [0, 90); scalar or any shape ``(*angle)``.
 
     Returns:
-        :class:`Ellipsometry` with fields shaped ``(*angle, wl)``; conventions (Δ range,
-        relation to ``tmm.ellips``) in the module docstring.
+        :class:`Ellipsometry` with fields shaped ``(*angle, wl)``; Δ with the sign and range
+        ellipsometers report (Woollam, Sentech, Accurion, pyElli, refellips); relation to
+        ``tmm.ellips`` in the module docstring.
     """
     r_s, r_p = reflection_amplitudes(stack, wavelength_nm, angle_deg)
     psi, delta = psi_delta(r_s, r_p)

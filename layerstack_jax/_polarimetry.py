@@ -1,22 +1,32 @@
 r"""Polarimetry: polarization-resolved BRDF and Mueller matrices of any stack (Ellis 1996).
 
-Stokes and Mueller conventions (fixed here for the package)
--------------------------------------------------------------
+Stokes and Mueller conventions (fixed here for the package): the instruments' frame
+-------------------------------------------------------------------------------------
 * The basis of the transverse field is ``(p, s)``: the Jones vector is :math:`E = (E_p, E_s)`,
   with the amplitude conventions of :mod:`layerstack_jax._fresnel` (``tmm``/Born & Wolf:
   :math:`r_p = -r_s` at normal incidence), time dependence :math:`e^{-i\omega t}`.
-* Stokes vector :math:`S_k = E^\dagger \sigma_k E` with the Pauli matrices
+* Stokes vector :math:`S_k = E^\dagger \sigma_k E` with
   :math:`\sigma_0 = 1`, :math:`\sigma_1 = \operatorname{diag}(1, -1)`,
-  :math:`\sigma_2 = [[0, 1], [1, 0]]`, :math:`\sigma_3 = [[0, -i], [i, 0]]`, i.e.
-  :math:`I = I_p + I_s`, :math:`Q = I_p - I_s`, :math:`U = 2\operatorname{Re}(\bar E_p E_s)`,
-  :math:`V = 2\operatorname{Im}(\bar E_p E_s)`; intensities are power fluxes through the surface.
+  :math:`\sigma_2 = [[0, 1], [1, 0]]`, :math:`\sigma_3 = [[0, i], [-i, 0]]`, i.e.
+  :math:`I = I_p + I_s`, :math:`Q = I_p - I_s`, :math:`U = 2\operatorname{Re}(E_p \bar E_s)`,
+  :math:`V = 2\operatorname{Im}(E_p \bar E_s)`; intensities are power fluxes through the surface.
+  This sign of V is the one of ellipsometers, whose Jones calculus is written with
+  :math:`e^{+i\omega t}` (the conjugate amplitudes): it makes the Mueller matrix of a reflection
+  the measured one. (With :math:`V = 2\operatorname{Im}(\bar E_p E_s)` instead, the
+  "physics-frame" Mueller matrix — e.g. pyElli 0.23's ``Result.mueller_matrix`` — the elements
+  of row 4 and column 4 change sign: :math:`M_\text{here} = D M_\text{physics} D`,
+  :math:`D = \operatorname{diag}(1, 1, 1, -1)`.)
 * A Jones matrix :math:`J` maps to the Mueller matrix
   :math:`M_{kl} = \tfrac12 \operatorname{tr}(J^\dagger\sigma_k J \sigma_l)`. For the reflection
   :math:`J = \operatorname{diag}(r_p, r_s)` this is
   :math:`m_{00}\,[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]` with
   :math:`N = \cos 2\psi`, :math:`C = \sin 2\psi\cos\Delta`, :math:`S = \sin 2\psi\sin\Delta`
-  (:mod:`layerstack_jax._ellipsometry`): the frame of reflection ellipsometry, in which a
-  perfect mirror at normal incidence is :math:`\operatorname{diag}(1, 1, -1, -1)`.
+  and Δ as ellipsometers report it (:mod:`layerstack_jax._ellipsometry`): the frame of
+  reflection ellipsometry as Mueller-matrix ellipsometers report it, in which a perfect
+  mirror at normal incidence is :math:`\operatorname{diag}(1, 1, -1, -1)`. Checked against a
+  measured Sentech Mueller matrix of 103 nm SiO2 on Si (tests/test_polarimetry.py): all 16
+  elements agree to ~0.01 rms, where the physics frame misses M34 and M43 (1-based names,
+  :math:`m_{23}, m_{32}` here) by 1.3 rms.
 * Arrays: Stokes vectors ``(*batch, 4, wl)``, Mueller matrices ``(*batch, 4, 4, wl)`` — the
   wavelength stays the last axis, as everywhere in the package; :func:`apply_mueller` does the
   product. Polarization-resolved BRDFs ``(*angle, 2, 2, wl)``: axis −3 the illumination,
@@ -78,14 +88,15 @@ __all__ = [
     "stokes",
 ]
 
-#: Pauli matrices σ0..σ3 in the (p, s) basis (module docstring), shape (4, 2, 2).
+#: Pauli matrices σ0..σ3 in the (p, s) basis, σ3 with the sign of the instruments' frame
+#: (V = 2 Im(E_p Ē_s); module docstring), shape (4, 2, 2).
 PAULI = np.array(
-    [[[1, 0], [0, 1]], [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, -1j], [1j, 0]]],
+    [[[1, 0], [0, 1]], [[1, 0], [0, -1]], [[0, 1], [1, 0]], [[0, 1j], [-1j, 0]]],
     dtype=complex,
 )
 
 #: Stokes vectors of unit-intensity pure states, keyed by name: 'unpolarized', 's', 'p',
-#: '+45', '-45', 'R', 'L' (R: V = +1 in this module's convention).
+#: '+45', '-45', 'R', 'L' (named by the sign of V in this module's frame: R is V = +1).
 _STATES = {
     "unpolarized": (1.0, 0.0, 0.0, 0.0),
     "p": (1.0, 1.0, 0.0, 0.0),
@@ -242,7 +253,9 @@ def _front_reflection_correlations(rs: ResolvedStack, s):
 
 
 def _reflection_mueller(R_s, R_p, X):
-    """Mueller matrix ``(*B, 4, 4)``-by-``wl`` of a reflection with s–p correlation X."""
+    r"""Mueller matrix ``(*B, 4, 4)``-by-``wl`` of a reflection with s–p correlation
+    :math:`X = \langle r_p \bar r_s\rangle`, in the instruments' frame (module docstring):
+    :math:`m_{23} = -\operatorname{Im} X = m_{00}\sin 2\psi\sin\Delta`."""
     m00 = 0.5 * (R_s + R_p)
     m01 = 0.5 * (R_p - R_s)
     re, im = jnp.real(X), jnp.imag(X)
@@ -250,8 +263,8 @@ def _reflection_mueller(R_s, R_p, X):
     rows = [
         [m00, m01, z, z],
         [m01, m00, z, z],
-        [z, z, re, im],
-        [z, z, -im, re],
+        [z, z, re, -im],
+        [z, z, im, re],
     ]
     return jnp.stack([jnp.stack(row, axis=-2) for row in rows], axis=-3)
 
@@ -264,11 +277,14 @@ def specular_mueller(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Float[
 
     .. math::
         M = \begin{pmatrix} \bar R & (R_p - R_s)/2 & 0 & 0\\ (R_p - R_s)/2 & \bar R & 0 & 0\\
-            0 & 0 & \operatorname{Re}X & \operatorname{Im}X\\ 0 & 0 & -\operatorname{Im}X &
-            \operatorname{Re}X\end{pmatrix}.
+            0 & 0 & \operatorname{Re}X & -\operatorname{Im}X\\ 0 & 0 & \operatorname{Im}X &
+            \operatorname{Re}X\end{pmatrix}
+
+    in the instruments' frame (module docstring: :math:`m_{23} = m_{00} \sin 2\psi \sin\Delta`
+    with Δ as ellipsometers report it, positive over silicon).
 
     For a coherent top packet :math:`X = r_p \bar r_s` carries the s–p retardance
-    (:math:`\Delta = \arg X`); light returned through thick incoherent layers adds its
+    (:math:`\Delta = -\arg X`); light returned through thick incoherent layers adds its
     correlation incoherently. :math:`m_{00}` is the natural-light specular reflectance.
     Ellis's specular BRDF term is this matrix times :math:`\delta(\theta_r-\theta_i)
     \delta(\phi_r-\phi_i+\pi)/(\cos\theta_r\sin\theta_r)`.

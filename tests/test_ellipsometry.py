@@ -1,7 +1,13 @@
-"""Ellipsometry (rho = r_p / r_s, psi, Delta) against tmm.ellips and Fresnel closed forms.
+"""Ellipsometry (rho = r_p / r_s, psi, Delta) against tmm.ellips, Fresnel closed forms and a
+measured Woollam file.
 
-Expected values come from ``tmm`` or from Fresnel's formulas written here in numpy; nothing is
-computed with layerstack_jax except the quantity under test.
+Expected values come from ``tmm``, from Fresnel's formulas written here in numpy, or from a
+measurement; nothing is computed with layerstack_jax except the quantity under test.
+
+Δ is reported as ellipsometers report it: Δ = −arg(r_p/r_s) with the package's e^{−iωt},
+n + ik amplitudes, i.e. Δ = 180° − Δ_tmm. ``test_delta_sign_of_a_measured_woollam_file`` shows
+why: a J. A. Woollam RC2 file of oxidized silicon reads Δ ≈ 110°–174°, in (0°, 180°), where
+arg(r_p/r_s) is negative.
 """
 
 from __future__ import annotations
@@ -49,7 +55,8 @@ WL = np.array([310.0, 633.0, 1100.0])
 
 @pytest.mark.parametrize("K", [0, 1, 2, 3, 5])
 def test_psi_delta_match_tmm_ellips_random_stacks(K):
-    """psi identical to tmm.ellips; Delta = Delta_tmm + 180 deg (tmm uses arg(-r_p/r_s));
+    """psi identical to tmm.ellips; Delta = 180 deg - Delta_tmm (tmm reports arg(-r_p/r_s), the
+    instruments -arg(r_p/r_s));
     random stacks with dielectrics, semiconductors and metals (k <= 5), 12 angles to 89.5 deg."""
     rng = np.random.default_rng(100 + K)
     stacks, refs = [], []
@@ -72,7 +79,7 @@ def test_psi_delta_match_tmm_ellips_random_stacks(K):
         got_dl = np.deg2rad(np.asarray(out.delta_deg[b]))
         assert np.max(np.abs(got_psi - psi)) <= 1e-9
         # Delta is ill-conditioned only where |rho| ~ 0 (psi ~ 0, Brewster-like): weight by sin 2psi
-        err = np.abs(_wrap(got_dl - np.pi - dl)) * np.sin(2 * psi)
+        err = np.abs(_wrap(got_dl - (np.pi - dl))) * np.sin(2 * psi)
         assert np.max(err) <= 1e-9
         assert np.max(np.abs(np.asarray(out.rho[b]) - rho) / (1 + np.abs(rho))) <= 1e-9
         assert np.all((got_dl > -np.pi) & (got_dl <= np.pi))
@@ -93,7 +100,7 @@ def _fresnel_rs_rp(n0, n1, theta):
 
 @pytest.mark.parametrize("n1", [1.5, 3.88 + 0.02j, 0.13 + 3.4j, 1.2 + 5.0j])
 def test_bare_substrate_closed_form(n1):
-    """tan psi e^{i Delta} = r_p / r_s from Fresnel's formulas (no layer)."""
+    """tan psi e^{-i Delta} = r_p / r_s from Fresnel's formulas (no layer): Delta = -arg(r_p/r_s)."""
     angles = np.linspace(0.0, 89.0, 37)
     wl = np.array([500.0, 700.0])
     st = ls.Stack(1.0, [], ls.Substrate(ls.Index(n1.real, n1.imag) if isinstance(n1, complex) else n1))
@@ -104,7 +111,7 @@ def test_bare_substrate_closed_form(n1):
         np.testing.assert_allclose(np.asarray(e.rho[i]), rho, rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(np.asarray(e.psi_deg[i]), math.degrees(math.atan(abs(rho))), atol=1e-10)
         if abs(rho) > 1e-6:
-            d = math.degrees(cmath.phase(rho))
+            d = -math.degrees(cmath.phase(rho))
             assert abs(_wrap(np.deg2rad(np.asarray(e.delta_deg[i]) - d))).max() <= 1e-10
 
 
@@ -192,3 +199,41 @@ def test_bad_input_raises():
         ls.ellipsometry(_film_stack(10.0), np.array([500.0]), 90.0)
     with pytest.raises(ls.LayerstackError, match="angle_deg"):
         ls.ellipsometry(_film_stack(10.0), np.array([500.0]), -1.0)
+
+
+# J. A. Woollam RC2 measurement (CompleteEASE 6.37) of ~2 nm native SiO2 on Si, 70°, as shipped
+# by pyElli (github.com/PyEllips/pyElli, examples/gallery/SiO2onSi.ellips.nxs at commit aa49502,
+# GPL-3.0 repository; measured values quoted for a test): (wavelength nm, psi deg, Delta deg).
+WOOLLAM_SIO2_SI_70 = np.array([
+    (250.0, 35.11196, 110.37192), (300.0, 29.85667, 141.44139), (350.0, 26.16517, 147.30881),
+    (400.0, 20.38003, 169.13811), (450.0, 15.80446, 171.10200), (500.0, 13.45709, 171.97935),
+    (550.0, 12.01816, 172.61429), (600.0, 11.03281, 173.02867), (650.0, 10.32219, 173.40695),
+    (700.0, 9.77915, 173.77614), (750.0, 9.36196, 174.15385), (800.0, 9.02136, 174.41823),
+])
+
+
+def test_delta_sign_of_a_measured_woollam_file():
+    """The reported Delta is the instrument's: a Woollam file of native oxide on silicon (Si from
+    Aspnes & Studna, SiO2 Cauchy 1.452 + 0.0036/lambda^2) is matched to <= 1 deg rms in psi and
+    Delta at the best thickness of a 0–10 nm scan (about 2 nm); the opposite sign of Delta (the
+    former convention, arg(r_p/r_s)) misses it by more than 40 deg rms at every thickness."""
+    wl, psi_m, delta_m = WOOLLAM_SIO2_SI_70.T
+    si = ls.material("Si", "Aspnes")
+
+    def psi_delta(d):
+        st = ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.452, 0.0036), d)], ls.Substrate(si))
+        e = ls.ellipsometry(st, wl, 70.0)
+        return e.psi_deg, e.delta_deg
+
+    thickness = np.linspace(0.0, 10.0, 201)
+    psi, delta = (np.asarray(x) for x in jax.jit(jax.vmap(psi_delta))(thickness))
+
+    def rms(sign):
+        dd = np.rad2deg(_wrap(np.deg2rad(sign * delta - delta_m)))
+        return np.sqrt(np.mean((psi - psi_m) ** 2 + dd**2, axis=-1))
+
+    best = int(np.argmin(rms(1.0)))
+    assert rms(1.0)[best] <= 1.0
+    assert 1.0 <= thickness[best] <= 3.0
+    assert np.all(delta[best] > 0) and np.all(delta[best] < 180)
+    assert np.min(rms(-1.0)) > 40.0

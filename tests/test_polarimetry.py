@@ -38,9 +38,13 @@ WL = np.array([420.0, 550.0, 700.0])
 
 
 def _stokes(E):
-    """Stokes vector of Jones vectors E = (E_p, E_s) shaped (..., 2) (module convention)."""
+    """Stokes vector of Jones vectors E = (E_p, E_s) shaped (..., 2) in the instruments' frame:
+    U = 2 Re(E_p conj(E_s)), V = 2 Im(E_p conj(E_s)). With the package's e^{-iwt} amplitudes
+    this sign of V gives the measured Mueller matrix
+    (test_specular_mueller_matches_measured_sentech_matrix); V = 2 Im(conj(E_p) E_s) would flip
+    M34 and M43."""
     Ep, Es = E[..., 0], E[..., 1]
-    x = np.conj(Ep) * Es
+    x = Ep * np.conj(Es)
     return np.stack([abs(Ep) ** 2 + abs(Es) ** 2, abs(Ep) ** 2 - abs(Es) ** 2, 2 * x.real, 2 * x.imag], axis=-1)
 
 
@@ -276,6 +280,54 @@ def test_specular_mueller_thick_layer_equals_phase_average_of_coherent_results()
     dop = np.asarray(ls.degree_of_polarization(ls.apply_mueller(M, ls.stokes("+45"))))
     assert np.all(dop[1:] < 1 - 1e-6)
     assert np.all(np.asarray(ls.is_physical(M)))
+
+
+# Sentech SpectraRay Mueller-matrix measurement of SiO2 on Si at 70.2 deg, normalized (m11 = 1), as
+# shipped by pyElli (github.com/PyEllips/pyElli, examples/gallery/Wafer_MM_70.txt at commit
+# aa49502, GPL-3.0 repository; measured values quoted for a test). Rows: wavelength (nm), then
+# M11 M12 M13 M14 M21 ... M44 (row-major, the file's order).
+SENTECH_SIO2_SI_MM_70 = np.array([
+    (249.93661, 1.00000, -0.37419, -0.00042, -0.00147, -0.37476, 0.99966, -0.00673, 0.00496, 0.00025, -0.00407, -0.50406, 0.77598, 0.00277, 0.00224, -0.77375, -0.52433),
+    (300.08083, 1.00000, -0.42807, 0.00423, -0.00664, -0.42519, 0.99959, -0.00746, -0.00372, 0.00141, -0.00661, -0.52993, -0.73920, 0.00310, 0.00729, 0.73649, -0.50845),
+    (349.81389, 1.00000, -0.23683, 0.01837, 0.02309, -0.23816, 0.99888, -0.00675, -0.00304, -0.00180, -0.00356, -0.12377, -0.96026, 0.01947, 0.01523, 0.95953, -0.15658),
+    (400.07646, 1.00000, 0.23281, -0.00008, 0.00829, 0.23095, 0.99874, -0.00375, 0.00055, -0.00223, -0.00272, -0.14083, -0.95827, 0.00339, 0.00110, 0.96229, -0.15616),
+    (450.01148, 1.00000, 0.87116, -0.00054, 0.00051, 0.86833, 0.99882, -0.00021, -0.00004, -0.00334, -0.00357, -0.30131, -0.37051, 0.00340, 0.00548, 0.36944, -0.29093),
+    (500.08504, 1.00000, 0.82023, -0.00174, -0.00111, 0.81702, 0.99677, -0.00188, 0.00027, -0.00256, -0.00362, -0.14318, 0.54808, 0.00212, -0.00081, -0.54810, -0.14571),
+    (549.86779, 1.00000, 0.39754, -0.01971, -0.00150, 0.39608, 0.99907, -0.01114, 0.00043, -0.00226, -0.00156, 0.06085, 0.91363, 0.01642, 0.01393, -0.91412, 0.04179),
+    (599.79145, 1.00000, 0.08452, -0.00211, -0.00136, 0.08302, 0.99846, -0.00325, 0.00192, -0.00097, -0.00071, 0.16016, 0.98003, 0.00139, -0.00046, -0.98082, 0.15292),
+    (649.83145, 1.00000, -0.11493, 0.00130, 0.00001, -0.11530, 0.99754, -0.00369, 0.00108, -0.00100, -0.00134, 0.19317, 0.96817, -0.00148, -0.00372, -0.97024, 0.19363),
+    (699.94601, 1.00000, -0.24913, 0.00761, 0.00343, -0.24786, 0.99705, -0.00406, -0.00076, 0.00011, -0.00176, 0.19686, 0.94115, -0.00541, -0.00930, -0.94316, 0.20084),
+    (750.07478, 1.00000, -0.34580, -0.00068, -0.00251, -0.34441, 0.99669, -0.00124, 0.00154, -0.00063, -0.00118, 0.18616, 0.91367, 0.00267, -0.00223, -0.91507, 0.17981),
+    (800.13732, 1.00000, -0.41782, 0.01092, 0.00724, -0.41655, 0.99656, -0.00688, -0.00419, 0.00077, -0.00148, 0.16972, 0.88633, -0.00807, -0.01161, -0.88813, 0.17830),
+])
+
+
+def test_specular_mueller_matches_measured_sentech_matrix():
+    """The Mueller frame is the instruments': the normalized specular Mueller matrix of SiO2
+    (Cauchy 1.452 + 0.0036/lambda^2) on Si (Aspnes & Studna) at the best thickness of a 90–130 nm
+    scan (about 103.5 nm) matches a measured Sentech matrix on all 16 elements, rms <= 0.03 (each
+    element <= 0.03 rms). In the physics frame (V = 2 Im(conj(E_p) E_s), M34 and M43 flipped)
+    the best thickness misses by > 0.3 rms and M34/M43 alone by > 1."""
+    wl = SENTECH_SIO2_SI_MM_70[:, 0]
+    measured = SENTECH_SIO2_SI_MM_70[:, 1:].reshape(-1, 4, 4)
+    si = ls.material("Si", "Aspnes")
+
+    def normalized(d):
+        st = ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.452, 0.0036), d)], ls.Substrate(si))
+        M = ls.specular_mueller(st, wl, 70.2)
+        return jnp.moveaxis(M / M[0, 0], -1, 0)  # (wl, 4, 4)
+
+    thickness = np.linspace(90.0, 130.0, 161)
+    M = np.asarray(jax.jit(jax.vmap(normalized))(thickness))
+    rms = np.sqrt(np.mean((M - measured) ** 2, axis=(1, 2, 3)))
+    best = int(np.argmin(rms))
+    assert rms[best] <= 0.03 and 100.0 <= thickness[best] <= 107.0
+    assert np.all(np.sqrt(np.mean((M[best] - measured) ** 2, axis=0)) <= 0.03)
+    D = np.diag([1.0, 1.0, 1.0, -1.0])
+    physics = D @ M @ D
+    rms_physics = np.sqrt(np.mean((physics - measured) ** 2, axis=(1, 2, 3)))
+    assert np.min(rms_physics) > 0.3
+    assert np.sqrt(np.mean((physics[best][:, [2, 3], [3, 2]] - measured[:, [2, 3], [3, 2]]) ** 2)) > 1.0
 
 
 def _random_mixed(rng):

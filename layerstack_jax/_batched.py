@@ -1,0 +1,392 @@
+r"""Batched prediction: many spectra of one stack structure, in chunks of bounded memory.
+
+Any leaf of a :class:`~layerstack_jax.Stack` — a thickness, α(λ), ρg(λ), an index n or k, a
+dispersion coefficient — may carry leading *batch* axes; :func:`predict` returns what
+:func:`~layerstack_jax.reflectance` returns for one stack, with those axes in front:
+``(*batch, *angle, wl)``.
+
+Which axes of a leaf are batch axes (the rule the :class:`~layerstack_jax.Layer` docstring
+states: leaves broadcast against ``(*batch, wl)``):
+
+* *spectral* leaves — ``Layer.thickness``, ``Layer.alpha``, ``LambertianBackground.reflectance``,
+  ``Index.n``/``k``, ``Cauchy.A``/``B``/``C``/``k``, ``Sellmeier.k`` — are a scalar, ``(1,)`` or
+  ``(wl,)`` for one stack; with batch axes they are ``(*batch, 1)`` or ``(*batch, wl)``. When
+  ``batch_shape`` is given, ``(*batch_shape,)`` (one scalar per spectrum, no trailing axis) is
+  accepted too.
+* *vector* leaves — ``Sellmeier.B``/``C``, tabulated values (``TabulatedSpectrum.values``,
+  ``Tabulated.n``/``k``), database formula coefficients — are ``(m,)`` for one stack and
+  ``(*batch, m)`` batched.
+
+The batch shape is ``batch_shape`` if given, else the broadcast of the leaves' batch parts. A
+leaf whose batch part does not broadcast to it raises a :class:`LayerstackError` naming the
+field (``layers[0].thickness``, ``exit.reflectance`` …).
+
+How it runs (PHYSICS.md, trap 8): the batch is flattened to N spectra; one jitted function per
+model structure and shared values evaluates ``step`` spectra per call as
+``jax.lax.map(spectrum, rows, batch_size=chunk)`` — XLA vmaps the forward model over blocks of
+``chunk`` spectra and loops over the blocks, so the intermediates scale with ``chunk``, never
+with N. A Python loop only over calls (the last one padded, so one compiled shape serves all)
+copies each call's result into the output array on the host and advances a progress bar.
+Leaves that are not batched stay constants of the compiled function (critical angles and
+quadrature segments are laid out once); when only thick-layer thicknesses, α and ρg are
+batched, the Fresnel algebra (:func:`~layerstack_jax.fixed_optics`) is computed once, not per
+spectrum. Inside ``jax.jit``/``jax.grad`` (traced leaves) the same ``lax.map`` runs in the
+caller's trace and a JAX array is returned.
+"""
+
+from __future__ import annotations
+
+import collections
+import hashlib
+import logging
+import math
+import sys
+import time
+from typing import Callable, NamedTuple, Optional, Union
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._geometry import Geometry, fixed_optics, reflectance
+from ._quadrature import DEFAULT_NODES
+from ._stack import LambertianBackground, Layer, Stack
+from ._validate import LayerstackError, is_concrete
+
+__all__ = ["predict", "batch_layout", "BatchLayout", "DEFAULT_CHUNK", "DEFAULT_STEP"]
+
+#: Spectra per vmapped block inside ``lax.map`` (bounds the intermediates: ~1.7 MB per P2 spectrum).
+DEFAULT_CHUNK = 4
+#: Spectra per compiled call (one progress update; the host copies this many spectra at a time).
+DEFAULT_STEP = 2048
+
+log = logging.getLogger("layerstack_jax.batched")
+
+# (module type name, field name) -> role; other leaves are "vector" (core: one trailing axis at most)
+_SPECTRAL_FIELDS = {
+    ("Layer", "thickness"), ("Layer", "alpha"), ("LambertianBackground", "reflectance"),
+    ("Index", "n"), ("Index", "k"), ("Cauchy", "A"), ("Cauchy", "B"), ("Cauchy", "C"), ("Cauchy", "k"),
+    ("Sellmeier", "k"),
+}
+
+
+class BatchLayout(NamedTuple):
+    """How the leaves of a stack are batched (made by :func:`batch_layout`).
+
+    ``batch_shape``: the leading axes of the result; ``batched``: per leaf of
+    ``jax.tree_util.tree_flatten(stack)``, True if it carries batch axes; ``cores``: per leaf,
+    the shape of one stack's value (``()``, ``(1,)``, ``(wl,)``, ``(m,)``); ``names``: per leaf,
+    the field name used in messages (``layers[0].thickness``)."""
+
+    batch_shape: tuple
+    batched: tuple
+    cores: tuple
+    names: tuple
+
+
+def _field_names(stack: Stack):
+    """Per leaf: (readable field name, role) — walking the flattened paths through the stack."""
+    out = []
+    for path, _ in jax.tree_util.tree_flatten_with_path(stack)[0]:
+        obj, parts, parent, field = stack, [], stack, None
+        for key in path:
+            parent = obj
+            if isinstance(key, jax.tree_util.GetAttrKey):
+                field = key.name
+                obj = getattr(obj, key.name)
+                parts.append(f".{key.name}")
+            elif isinstance(key, jax.tree_util.SequenceKey):
+                obj = obj[key.idx]
+                label = getattr(obj, "name", "") if isinstance(obj, Layer) else ""
+                parts.append(f"[{key.idx}]" + (f" ({label!r})" if label else ""))
+            else:  # pragma: no cover - dict keys do not occur in a Stack
+                obj = obj[getattr(key, "key", key)]
+                parts.append(f"[{key}]")
+        role = "spectral" if (type(parent).__name__, field) in _SPECTRAL_FIELDS else "vector"
+        out.append(("".join(parts).lstrip("."), role))
+    return out
+
+
+def _broadcasts(part: tuple, batch: tuple) -> bool:
+    """True if ``part`` (a leaf's batch axes) broadcasts to ``batch`` (numpy rules)."""
+    if len(part) > len(batch):
+        return False
+    return all(p in (1, b) for p, b in zip(part[::-1], batch[::-1]))
+
+
+def _split_leaf(name: str, role: str, shape: tuple, wl: int, batch: Optional[tuple]):
+    """``(batch part or None if shared, core shape)`` of one leaf; raises naming the field."""
+    hint = (f"{name}: shape {shape} does not fit a batch of stacks on {wl} wavelengths: give it as "
+            "(*batch, 1) for one value per spectrum, (*batch, wl) for one spectrum each")
+    if role == "spectral":
+        if batch is not None:
+            nb = len(batch)
+            cores = ((), (1,), (wl,))
+            as_batched = nb > 0 and len(shape) >= nb and shape[nb:] in cores and _broadcasts(shape[:nb], batch)
+            as_shared = shape in cores
+            if as_batched and as_shared and shape != (1,):
+                raise LayerstackError(
+                    f"{name}: shape {shape} is ambiguous for batch_shape {batch} on {wl} wavelengths (one value per "
+                    f"spectrum, or one spectrum shared by all?): give it as {batch + (1,)} or as (1, {wl})")
+            if as_shared:
+                return None, shape
+            if as_batched:
+                return shape[:nb], shape[nb:]
+            raise LayerstackError(hint + f" (batch_shape {batch})")
+        if len(shape) <= 1:
+            if shape in ((), (1,), (wl,)):
+                return None, shape
+            raise LayerstackError(hint + ", or pass batch_shape=")
+        if shape[-1] not in (1, wl):
+            raise LayerstackError(hint)
+        return shape[:-1], shape[-1:]
+    # vector leaves: one trailing core axis at most
+    if batch is not None:
+        nb = len(batch)
+        if nb and len(shape) == nb + 1 and _broadcasts(shape[:nb], batch):
+            return shape[:nb], shape[nb:]
+        if len(shape) <= 1:
+            return None, shape
+        raise LayerstackError(f"{name}: shape {shape} is neither one stack's value (m,) nor (*{batch}, m)")
+    if len(shape) <= 1:
+        return None, shape
+    return shape[:-1], shape[-1:]
+
+
+def batch_layout(stack: Stack, n_wavelengths: int, batch_shape=None) -> BatchLayout:
+    """Which leaves of ``stack`` carry batch axes, and the batch shape (module docstring).
+
+    Args:
+        stack: a :class:`~layerstack_jax.Stack` whose leaves may carry leading batch axes.
+        n_wavelengths: length of the wavelength grid.
+        batch_shape: the batch shape, or None to infer it from the leaves.
+
+    Raises :class:`LayerstackError` naming the field whose shape does not fit."""
+    if not isinstance(stack, Stack):
+        raise LayerstackError(f"predict: stack must be a layerstack_jax.Stack, got {type(stack).__name__}")
+    if batch_shape is None:
+        batch = None
+    else:
+        batch = tuple(int(b) for b in (batch_shape if isinstance(batch_shape, (tuple, list)) else (batch_shape,)))
+    if batch is not None and any(b < 1 for b in batch):
+        raise LayerstackError(f"batch_shape must hold positive lengths, got {batch_shape!r}")
+    leaves = jax.tree_util.tree_leaves(stack)
+    info = _field_names(stack)
+    parts, cores = [], []
+    for (name, role), leaf in zip(info, leaves):
+        part, core = _split_leaf(name, role, tuple(np.shape(leaf)), int(n_wavelengths), batch)
+        parts.append(part)
+        cores.append(core)
+    if batch is None:
+        try:
+            batch = tuple(np.broadcast_shapes(*[p for p in parts if p is not None]))
+        except ValueError:
+            shown = ", ".join(f"{n} {p}" for (n, _), p in zip(info, parts) if p is not None)
+            raise LayerstackError(f"the batch axes of the leaves do not broadcast together: {shown}") from None
+    else:
+        for (name, _), p in zip(info, parts):
+            if p is not None and not _broadcasts(p, batch):
+                raise LayerstackError(f"{name}: batch axes {p} do not broadcast to batch_shape {batch}")
+    return BatchLayout(batch, tuple(p is not None for p in parts), tuple(cores), tuple(n for n, _ in info))
+
+
+def _optics_fixed_by(stack: Stack, names: tuple, batched: tuple) -> bool:
+    """True if every batched leaf leaves :func:`fixed_optics` unchanged: thick-layer
+    thicknesses, α, and ρg (the Fresnel algebra can then be computed once for the batch)."""
+    flat = jax.tree_util.tree_flatten_with_path(stack)[0]
+    for (path, _), b in zip(flat, batched):
+        if not b:
+            continue
+        keys = [getattr(k, "name", getattr(k, "idx", None)) for k in path]
+        if keys[:1] == ["layers"] and len(keys) >= 3:
+            layer = stack.layers[keys[1]]
+            if keys[2] == "alpha" or (keys[2] == "thickness" and not layer.coherent):
+                continue
+        if keys[:2] == ["exit", "reflectance"] and isinstance(stack.exit, LambertianBackground):
+            continue
+        return False
+    return True
+
+
+def _digest(tree) -> str:
+    """Content hash of a pytree of constants (values, shapes, dtypes, structure)."""
+    h = hashlib.sha1()
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    h.update(str(treedef).encode())
+    for leaf in leaves:
+        a = np.asarray(leaf)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+_COMPILED: "collections.OrderedDict[tuple, Callable]" = collections.OrderedDict()
+_MAX_COMPILED = 8
+
+
+def _spectrum_function(treedef, shared: list, batched: tuple, wl, geometry: Geometry, nodes: int, optics):
+    """``rows -> one spectrum``: the stack rebuilt from shared constants and one batch row."""
+
+    def spectrum(rows):
+        it = iter(rows)
+        leaves = [next(it) if b else s for s, b in zip(shared, batched)]
+        stack = jax.tree_util.tree_unflatten(treedef, leaves)
+        return reflectance(stack, wl, geometry, nodes=nodes, optics=optics)
+
+    return spectrum
+
+
+def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int, use_optics: bool,
+              template_rows: tuple):
+    """The jitted ``rows (step, *core) -> spectra (step, *angle, wl)`` for this structure and
+    these shared values; cached (``_MAX_COMPILED`` entries, least recently used dropped)."""
+    leaves, treedef = jax.tree_util.tree_flatten(stack)
+    shared = [None if b else leaf for leaf, b in zip(leaves, lay.batched)]
+    key = (treedef, lay.batched, tuple((r.shape[1:], r.dtype.str) for r in template_rows),
+           _digest([s for s in shared if s is not None]), _digest((geometry, np.asarray(wl))), nodes, chunk, use_optics)
+    fn = _COMPILED.get(key)
+    if fn is not None:
+        _COMPILED.move_to_end(key)
+        return fn
+    optics = None
+    if use_optics:
+        first = iter(r[0] for r in template_rows)
+        one = jax.tree_util.tree_unflatten(treedef, [next(first) if b else s for s, b in zip(shared, lay.batched)])
+        optics = fixed_optics(one, wl, geometry, nodes=nodes)
+    spectrum = _spectrum_function(treedef, shared, lay.batched, wl, geometry, nodes, optics)
+    fn = jax.jit(lambda rows: jax.lax.map(spectrum, rows, batch_size=chunk))
+    _COMPILED[key] = fn
+    while len(_COMPILED) > _MAX_COMPILED:
+        _COMPILED.popitem(last=False)
+    return fn
+
+
+def _progress(progress, total: int) -> Optional[Callable[[int], None]]:
+    """``update(done)`` for ``progress``: a callable ``f(done, total)``, True (tqdm bar, else
+    a line on stderr), or False/None (nothing)."""
+    if not progress:
+        return None
+    if callable(progress):
+        return lambda done: progress(done, total)
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover - tqdm is in the 'cube' extra
+        return lambda done: print(f"\rpredict: {done}/{total} spectra", end="\n" if done >= total else "",
+                                  file=sys.stderr, flush=True)
+    bar = tqdm(total=total, unit="spectrum", desc="predict", smoothing=0.1)
+
+    def update(done):
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+
+    return update
+
+
+def _rows(leaf, batch: tuple, core: tuple, flat_index: np.ndarray):
+    """Rows ``flat_index`` of a batched leaf broadcast to ``(*batch, *core)``: ``(len, *core)``,
+    copying only those rows (the broadcast itself is a view)."""
+    a = np.asarray(leaf)
+    view = np.broadcast_to(a, batch + core)
+    return np.ascontiguousarray(view[np.unravel_index(flat_index, batch)])
+
+
+def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None, chunk: int = DEFAULT_CHUNK,
+            step: int = DEFAULT_STEP, progress: Union[None, bool, Callable[[int, int], None]] = None,
+            nodes: int = DEFAULT_NODES, out: Optional[np.ndarray] = None):
+    r"""What :func:`~layerstack_jax.reflectance` reads for every stack of a batch (module docstring).
+
+    Args:
+        stack: a stack whose leaves may carry leading batch axes (spectral leaves broadcast
+            against ``(*batch, wl)``: a thickness per spectrum is ``(*batch, 1)``, or
+            ``(*batch,)`` when ``batch_shape`` is given).
+        wavelength_nm: ``(wl,)`` vacuum wavelengths in nm.
+        geometry: any :class:`~layerstack_jax.Geometry` (angles in degrees; array angles add
+            ``(*angle)`` axes after the batch axes).
+        batch_shape: the batch axes, or None to infer them from the leaves.
+        chunk: spectra per vmapped block (memory: about 1.7 MB per spectrum for a 401-λ sphere
+            prediction over a background).
+        step: spectra per compiled call (rounded up to a multiple of ``chunk``): the host
+            copies and the progress bar advances once per call.
+        progress: True for a progress bar (tqdm), a callable ``f(done, total)``, or None/False.
+            None shows a bar when more than 100,000 spectra are predicted.
+        nodes: Gauss–Legendre nodes per critical-angle segment of the diffuse integrals.
+        out: optional preallocated float array ``(*batch, *angle, wl)`` (e.g. a
+            ``numpy.memmap``) to write into; returned.
+
+    Returns:
+        ``(*batch, *angle, wl)``, in the unit the geometry reads (a dimensionless reflectance
+        (factor), 1/sr for :class:`~layerstack_jax.BRDF`): a NumPy array (or ``out``) for
+        concrete inputs, a JAX array when called inside a transformation (``jax.jit``,
+        ``jax.grad``, ``jax.vmap``), where it is differentiable like
+        :func:`~layerstack_jax.reflectance`.
+
+    Raises :class:`LayerstackError` naming the field whose batch axes do not fit, for a bad
+    ``chunk``/``step``, or for an invalid stack (negative thickness, ρg outside [0, 1], …).
+    """
+    if not isinstance(geometry, Geometry):
+        raise LayerstackError(f"predict: geometry must be a layerstack_jax Geometry, got {geometry!r}")
+    for what, v in (("chunk", chunk), ("step", step)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
+            raise LayerstackError(f"predict: {what} must be an integer >= 1, got {v!r}")
+    wl = wavelength_nm if not is_concrete(wavelength_nm) else np.asarray(wavelength_nm, dtype=float)
+    if np.ndim(wl) != 1:
+        raise LayerstackError(f"wavelength_nm must be 1-D, got shape {np.shape(wl)}")
+    lay = batch_layout(stack, np.shape(wl)[0], batch_shape)
+    leaves, treedef = jax.tree_util.tree_flatten(stack)
+    batch = lay.batch_shape
+    n = math.prod(batch)
+    if not any(lay.batched):  # nothing batched: one spectrum, repeated over an explicit batch_shape
+        value = reflectance(stack, wl, geometry, nodes=nodes)
+        value = jnp.broadcast_to(value, batch + value.shape)
+        return np.array(value) if is_concrete((stack, wl, geometry)) else value
+    if not is_concrete((stack, wl, geometry)):
+        return _predict_traced(leaves, treedef, lay, wl, geometry, nodes, int(chunk))
+    chunk = int(min(chunk, n))
+    step = int(-(-min(max(int(step), chunk), n) // chunk) * chunk)
+    batched = [(leaf, core) for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b]
+    first = tuple(_rows(leaf, batch, core, np.zeros(1, int)) for leaf, core in batched)
+    fn = _compiled(stack, lay, wl, geometry, nodes, chunk, _optics_fixed_by(stack, lay.names, lay.batched), first)
+    update = _progress(n > 100_000 if progress is None else progress, n)
+    t0 = time.perf_counter()
+    flat_out = None
+    for start in range(0, n, step):
+        idx = np.arange(start, start + step)
+        valid = min(step, n - start)
+        idx[valid:] = start  # pad the last call with copies of its first row: one compiled shape
+        rows = tuple(_rows(leaf, batch, core, idx) for leaf, core in batched)
+        values = np.asarray(fn(rows))
+        if flat_out is None:
+            out, flat_out = _output(out, batch, values.shape[1:], values.dtype)
+        flat_out[start:start + valid] = values[:valid]
+        if update is not None:
+            update(start + valid)
+    elapsed = time.perf_counter() - t0
+    log.info("predicted %d spectra in %.3g s (%.4g spectra/s, chunk %d, step %d)", n, elapsed,
+             n / max(elapsed, 1e-12), chunk, step)
+    return out
+
+
+def _output(out, batch: tuple, tail: tuple, dtype):
+    """The result array ``(*batch, *tail)`` (``out`` checked, or a new one) and its flat view ``(N, *tail)``."""
+    if out is None:
+        out = np.empty(batch + tail, dtype=dtype)
+    elif tuple(out.shape) != batch + tail:
+        raise LayerstackError(f"predict: out has shape {tuple(out.shape)}, the result is {batch + tail}")
+    flat = out.reshape((math.prod(batch),) + tail)  # a view for C-contiguous arrays and memmaps
+    if not np.shares_memory(flat, out):
+        raise LayerstackError("predict: out must be C-contiguous")
+    return out, flat
+
+
+def _predict_traced(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int):
+    """:func:`predict` inside a JAX transformation: one ``lax.map`` over vmapped blocks in the
+    caller's trace (differentiable), returning a JAX array ``(*batch, *angle, wl)``."""
+    batch = lay.batch_shape
+    n = math.prod(batch)
+    rows = tuple(jnp.reshape(jnp.broadcast_to(jnp.asarray(leaf), batch + core), (n,) + core)
+                 for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b)
+    shared = [None if b else leaf for leaf, b in zip(leaves, lay.batched)]
+    spectrum = _spectrum_function(treedef, shared, lay.batched, wl, geometry, nodes, None)
+    values = jax.lax.map(spectrum, rows, batch_size=min(chunk, n))
+    return jnp.reshape(values, batch + values.shape[1:])

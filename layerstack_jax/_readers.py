@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import csv
 import io as _io
+import json
 import math
 import re
 from pathlib import Path
@@ -180,7 +181,7 @@ def _check_angle(path, line, value: float) -> None:
 # ---------------------------------------------------------------------------------------------
 _MUELLER_LABEL = re.compile(r"^m{1,2}([1-4])([1-4])$", re.IGNORECASE)
 _PSI_DELTA_LABELS = {"e"}
-_HEADER_COLUMN_WORDS = {"aoi", "psi", "delta", "angle", "ψ", "δ", "δ"}
+_HEADER_COLUMN_WORDS = {"aoi", "psi", "delta", "angle", "ψ", "δ"}
 
 
 def _woollam_unit_line(tokens: list[str]) -> Optional[str]:
@@ -233,7 +234,9 @@ def read_woollam(path) -> Measurement:
             unit = u
         header.append((i, line.strip()))
     if unit is None:
-        raise _error(path, None, "no wavelength-unit line ('nm', 'Angstroms', 'eV' or 'um') before the data: not a Woollam export")
+        raise _error(
+            path, None, "no wavelength-unit line ('nm', 'Angstroms', 'eV' or 'um') before the data: not a Woollam export"
+        )
     if start is None:
         raise _error(path, len(lines), "no data rows after the header")
 
@@ -482,7 +485,8 @@ def read_accurion(path) -> Measurement:
             continue
         tokens = line.split("\t")
         if len(tokens) < len(names):
-            raise _error(path, i, f"expected {len(names)} tab-separated fields, got {len(tokens)}" + (" (truncated file?)" if i == len(lines) else ""))
+            why = f"expected {len(names)} tab-separated fields, got {len(tokens)}"
+            raise _error(path, i, why + (" (truncated file?)" if i == len(lines) else ""))
         try:
             r = [float(tokens[col[k]]) for k in ("lambda", "aoi", "psi", "delta")]
             r.append(float(tokens[roi]) if roi is not None else 0.0)
@@ -574,9 +578,11 @@ def read_nexus(path, *, entry: str = "entry") -> Measurement:
             raise _error(path, None, f"no NXentry group {entry!r} (groups: {', '.join(f.keys())})")
         e = f[entry]
         if "data_collection/measured_data" in e:
-            data_p, wl_p, type_p, err_p = (f"data_collection/{k}" for k in ("measured_data", "wavelength_spectrum", "data_type", "data_error"))
-        else:
-            data_p, wl_p, type_p, err_p = "sample/measured_data", "instrument/spectrometer/wavelength", "sample/data_type", "sample/data_error"
+            keys = ("measured_data", "wavelength_spectrum", "data_type", "data_error")
+            data_p, wl_p, type_p, err_p = (f"data_collection/{k}" for k in keys)
+        else:  # the legacy layout of NXellipsometry 0.0.2 files
+            data_p, wl_p = "sample/measured_data", "instrument/spectrometer/wavelength"
+            type_p, err_p = "sample/data_type", "sample/data_error"
         for p in (data_p, wl_p, "instrument/angle_of_incidence"):
             if p not in e:
                 raise _error(path, None, f"dataset /{entry}/{p} missing (NXellipsometry requires it)")
@@ -598,7 +604,10 @@ def read_nexus(path, *, entry: str = "entry") -> Measurement:
             data = data[0]
         if data.shape != (ang.size, 2, wl.size):
             raise _error(
-                path, None, f"/{entry}/{data_p} has shape {np.shape(e[data_p])}; expected (angle, 2, wavelength) = {(ang.size, 2, wl.size)}"
+                path,
+                None,
+                f"/{entry}/{data_p} has shape {np.shape(e[data_p])}; "
+                f"expected (angle, 2, wavelength) = {(ang.size, 2, wl.size)}",
             )
         sigma = None
         if err_p in e and np.issubdtype(e[err_p].dtype, np.number):
@@ -688,7 +697,8 @@ def read_jcamp(path, *, angle_deg: Optional[float] = None, percent: Optional[boo
     y_line = next((i for i, ln in enumerate(lines, start=1) if ln.upper().startswith("##YUNITS")), None)
     x_line = next((i for i, ln in enumerate(lines, start=1) if ln.upper().startswith("##XUNITS")), None)
     if key not in _JCAMP_QUANTITY:
-        raise _error(path, y_line, f"##YUNITS= {yunits!r}: only reflectance or transmittance spectra can be read (not absorbance or counts)")
+        why = f"##YUNITS= {yunits!r}: only reflectance or transmittance spectra can be read (not absorbance or counts)"
+        raise _error(path, y_line, why)
     quantity, pct = _JCAMP_QUANTITY[key]
     xunits = str(d.get("xunits", "")).strip()
     if _unit(xunits) is None:
@@ -717,7 +727,9 @@ def read_jcamp(path, *, angle_deg: Optional[float] = None, percent: Optional[boo
     if np.any(np.diff(wl) <= 0):
         raise _error(path, None, "repeated x values")
     meta = tuple(
-        (k, str(d[k])) for k in ("title", "datatype", "data type", "origin", "owner", "spectrometer/data system", "xunits", "yunits") if k in d
+        (k, str(d[k]))
+        for k in ("title", "datatype", "data type", "origin", "owner", "spectrometer/data system", "xunits", "yunits")
+        if k in d
     ) + (("angle_source", "given by the caller"), ("percent", str(bool(pct))))
     return Measurement(
         quantity=quantity,
@@ -759,7 +771,7 @@ def _split_header_name(raw: str) -> tuple[str, str]:
     return name, unit.strip()
 
 
-_WAVELENGTH_NAMES = {"wavelength", "wave_length", "lambda", "wl", "wvl", "energy", "photon_energy", "wavenumber", "e"}
+_WAVELENGTH_NAMES = {"wavelength", "wave_length", "lambda", "wl", "wvl", "energy", "photon_energy", "wavenumber"}
 _ANGLE_NAMES = {"angle", "aoi", "angle_of_incidence", "incidence_angle", "theta", "angle_deg"}
 _SIGMA = re.compile(r"^(?:sigma|err|error|std|uncertainty|d)_?(.+)$|^(.+?)_?(?:sigma|err|error|std|uncertainty)$")
 
@@ -854,7 +866,7 @@ def read_measurement_csv(
     """
     lines = _read_text(path)
     hi, header, rows, comments, delim = _csv_rows(path, lines)
-    meta_in = {}
+    meta_pairs: list[tuple[str, str]] = []
     is_ours = bool(comments) and comments[0][1].strip() == _MAGIC
     extras: dict[str, list[list[float]]] = {}
     if is_ours:
@@ -868,9 +880,12 @@ def read_measurement_csv(
                 extras.setdefault(parts[1], []).append(nums)
             elif "=" in body:
                 k, v = body.split("=", 1)
-                meta_in.setdefault(k.strip(), []).append(v.strip())
+                try:
+                    meta_pairs.append((k.strip(), json.loads(v)))
+                except json.JSONDecodeError:
+                    raise _error(path, i, f"the value of {k.strip()!r} is not a JSON string") from None
     roles = []
-    for k, raw in enumerate(header):
+    for raw in header:
         name, unit = _split_header_name(raw)
         role, comp = _column_role(name, unit)
         roles.append((role, comp, unit, raw))
@@ -880,8 +895,6 @@ def read_measurement_csv(
     wl_col = wl_cols[0]
     wl_name, wl_unit = _split_header_name(header[wl_col])
     unit = wl_unit or (wl_name if _unit(wl_name) else "")
-    if wl_name in ("energy", "photon_energy", "e") and not unit:
-        unit = ""
     if _unit(unit) is None:
         raise _error(
             path, hi,
@@ -898,8 +911,9 @@ def read_measurement_csv(
         candidates.append("reflectance")
     if "T" in comps_present:
         candidates.append("transmittance")
-    if quantity is None and is_ours and "quantity" in meta_in:
-        quantity = meta_in["quantity"][0]
+    saved = dict(meta_pairs)  # the measurement CSV's own keys
+    if quantity is None and "quantity" in saved:
+        quantity = saved["quantity"]
     if quantity is not None:
         if quantity not in QUANTITIES:
             raise LayerstackError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
@@ -952,9 +966,9 @@ def read_measurement_csv(
         ang = np.rad2deg(data[:, ang_col]) if ang_unit.startswith("rad") else data[:, ang_col]
     else:
         ang = np.full(data.shape[0], float(angle_deg))
-    for r in range(data.shape[0]):
-        if not (0 <= ang[r] < 90):
-            _check_angle(path, line_of(r) if ang_col is not None else None, float(ang[r]))
+    bad = np.flatnonzero(~((ang >= 0) & (ang < 90)))
+    if bad.size:
+        _check_angle(path, line_of(int(bad[0])) if ang_col is not None else None, float(ang[bad[0]]))
 
     comps, sig = {}, {}
     for n in names:
@@ -992,15 +1006,13 @@ def read_measurement_csv(
         meta.append(("angle_source", "given by the caller"))
     normalized = quantity == "mueller" and "M11" not in value_col
     if is_ours:
-        one = {k: v[0] for k, v in meta_in.items()}
         fields = dict(
-            file_format=one.get("file_format", "csv"),
-            source=one.get("source", str(path)),
-            delta_convention=one.get("delta_convention", "instrument"),
+            file_format=saved.get("file_format", "csv"),
+            source=saved.get("source", str(path)),
+            delta_convention=saved.get("delta_convention", "instrument"),
         )
-        normalized = one.get("mueller_normalized", "false").lower() == "true"
-        pairs = [ln.lstrip()[1:].split("=", 1) for _, ln in comments[1:] if ln.lstrip()[1:].strip().startswith("meta.")]
-        meta = [(k.strip()[5:], v.strip()) for k, v in pairs]
+        normalized = saved.get("mueller_normalized", "false") == "true"
+        meta = [(k[5:], v) for k, v in meta_pairs if k.startswith("meta.")]
     return measurement_from_points(
         quantity, ang, wl, comps, sigma=sigma, extras=extras, where=str(path),
         mueller_normalized=normalized, metadata=tuple(meta), **fields,
@@ -1013,12 +1025,12 @@ def write_measurement_csv(path, measurement: Measurement) -> Path:
     Format (comma-separated, numbers as Python ``repr`` so every float survives exactly)::
 
         # layerstack measurement csv v1
-        # quantity = psi_delta
-        # delta_convention = instrument
-        # mueller_normalized = false
-        # file_format = woollam
-        # source = path/of/the/original.dat
-        # meta.<key> = <value>            (one line per metadata pair, in order)
+        # quantity = "psi_delta"
+        # delta_convention = "instrument"
+        # file_format = "woollam"
+        # source = "path/of/the/original.dat"
+        # mueller_normalized = "false"
+        # meta.<key> = "<value>"           (one line per metadata pair, in order; JSON strings)
         # extra <label> <wavelength_nm> <second column> <value> <sigma>   (one line per extra row)
         angle_deg,wavelength_nm,psi,delta,sigma_psi,sigma_delta
         65.0,300.0,12.140821,1.5609661,0.37071,3.46024
@@ -1036,13 +1048,17 @@ def write_measurement_csv(path, measurement: Measurement) -> Path:
     angles = arrays.pop("angles_deg")
     wls = arrays.pop("wavelength_nm")
     names = list(arrays)
-    out = [_MAGIC, f"# quantity = {m.quantity}", f"# delta_convention = {m.delta_convention}",
-           f"# mueller_normalized = {str(bool(m.mueller_normalized)).lower()}", f"# file_format = {m.file_format}",
-           f"# source = {m.source}"]
+    def text(v) -> str:
+        return json.dumps(str(v), ensure_ascii=False)
+
+    out = [_MAGIC]
+    for key in ("quantity", "delta_convention", "file_format", "source"):
+        out.append(f"# {key} = {text(getattr(m, key))}")
+    out.append(f"# mueller_normalized = {text(str(bool(m.mueller_normalized)).lower())}")
     for k, v in m.metadata:
-        if "\n" in str(k) or "\n" in str(v) or "=" in str(k):
-            raise LayerstackError(f"Measurement.metadata entry {k!r} cannot be written on one line")
-        out.append(f"# meta.{k} = {v}")
+        if "\n" in str(k) or "=" in str(k):
+            raise LayerstackError(f"Measurement.metadata key {k!r} cannot be written (newline or '=')")
+        out.append(f"# meta.{k} = {text(v)}")
     for label, rows in m.extras.items():
         if not label or any(c.isspace() for c in label):
             raise LayerstackError(f"Measurement.extras label {label!r} must be one word")

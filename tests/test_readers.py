@@ -334,13 +334,23 @@ def test_round_trip_of_selections_with_missing_points(tmp_path):
     assert m.angles_deg.tolist() == [60.0]
     values = m.values.copy()
     values[0, :, 3] = np.nan  # a point the file does not have
+    odd = (("note", "  leading spaces, a = sign, ψ/Δ and µm  "), ("note", "a repeated key"))
     m = Measurement(quantity=m.quantity, angles_deg=m.angles_deg, wavelength_nm=m.wavelength_nm,
                     values=values, sigma=m.sigma, extras=m.extras, file_format=m.file_format,
-                    source=m.source, metadata=m.metadata)
+                    source=m.source, metadata=m.metadata + odd)
     back = read_measurement_csv(write_measurement_csv(tmp_path / "m.csv", m))
     assert back.equals(m)
     assert not back.valid()[0, 3] and back.valid().sum() == m.wavelength_nm.size - 1
     assert not back.equals(read_woollam(CEASE))
+    assert back.metadata[-2:] == odd
+
+
+def test_woollam_wavelengths_in_ev(tmp_path):
+    p = _write(tmp_path, "ev.dat", "film\neV\n2.0\t70\t10\t120\t0.1\t0.2\n3.0\t70\t11\t130\t0.1\t0.3\n")
+    assert sniff_format(p) == "woollam"
+    m = read_measurement(p)
+    np.testing.assert_allclose(m.wavelength_nm, [1239.841984 / 3.0, 1239.841984 / 2.0], rtol=1e-9)
+    np.testing.assert_array_equal(m.values[0, :, 0], [11.0, 130.0])  # sorted by wavelength
 
 
 # ------------------------------------------------------------------------------------------
@@ -502,7 +512,8 @@ def test_woollam_mueller_rows(tmp_path):
 
 
 def test_jcamp_refusals(tmp_path):
-    with pytest.raises(LayerstackError, match=r"fixinc1.jdx, line 13: ##YUNITS= TRANSMITTANCE but the values reach 112.891.*percent=True"):
+    pct = r"fixinc1.jdx, line 13: ##YUNITS= TRANSMITTANCE but the values reach 112.891.*percent=True"
+    with pytest.raises(LayerstackError, match=pct):
         read_jcamp(JCAMP_PCT, angle_deg=0.0)
     with pytest.raises(LayerstackError, match=r"gives no angle of incidence: pass angle_deg="):
         read_jcamp(JCAMP)
@@ -543,7 +554,7 @@ def test_measurement_validation_names_the_field():
         Measurement(quantity="reflectance", angles_deg=np.array([90.0]), wavelength_nm=wl, values=np.zeros((1, 2)))
     m = Measurement(quantity="reflectance", angles_deg=ang, wavelength_nm=wl, values=np.zeros((1, 2)))
     with pytest.raises(LayerstackError, match="needs quantity 'psi_delta'"):
-        m.psi_deg
+        _ = m.psi_deg
     with pytest.raises(LayerstackError, match=r"angle_deg 45: the measurement .* has angles 70 degrees"):
         m.at_angle(45)
     with pytest.raises(LayerstackError, match=r"no wavelength in \[600, 700\] nm"):

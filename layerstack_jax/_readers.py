@@ -43,6 +43,7 @@ import io as _io
 import json
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -168,6 +169,23 @@ def _numbers(tokens: Sequence[str]) -> Optional[list[float]]:
 def _check_range(path, line, name: str, value: float, lo: float, hi: float, unit: str = "degrees") -> None:
     if not (math.isfinite(value) and lo <= value <= hi):
         raise _error(path, line, f"{name} = {value!r} is not a number in [{lo:g}, {hi:g}] {unit}")
+
+
+def _warn_implausible(path, m: Measurement) -> Measurement:
+    """Warn (not fail) when a measurement's values are possible in a file but not in nature:
+    R or T beyond [-0.02, 1.02], or normalised Mueller elements beyond ±1.05."""
+    v = np.asarray(m.values)
+    if m.quantity in ("reflectance", "transmittance"):
+        lo, hi = np.nanmin(v), np.nanmax(v)
+        if lo < -0.02 or hi > 1.02:
+            warnings.warn(
+                f"{path}: {m.quantity} spans [{lo:.4g}, {hi:.4g}] (fraction): outside [0, 1]; check the unit "
+                "(percent?) and the reference of the measurement",
+                stacklevel=3,
+            )
+    elif m.quantity == "mueller" and m.mueller_normalized and np.nanmax(np.abs(v)) > 1.05:
+        warnings.warn(f"{path}: normalised Mueller elements reach {np.nanmax(np.abs(v)):.4g} (beyond ±1)", stacklevel=3)
+    return m
 
 
 def _check_angle(path, line, value: float) -> None:
@@ -421,10 +439,10 @@ def read_sentech(path) -> Measurement:
         names = component_names("mueller")
         angs = ang_cols[::16]
         comps = {nm: vals[:, k::16].T.ravel() for k, nm in enumerate(names)}
-        return measurement_from_points(
+        return _warn_implausible(path, measurement_from_points(
             "mueller", np.repeat(angs, wl.size), np.tile(wl, angs.size), comps,
             where=str(path), mueller_normalized=True, **fields,
-        )
+        ))
     if n % 2 or np.any(ang_cols[0::2] != ang_cols[1::2]):
         raise _error(path, 1, "psi/delta exports need the angles in pairs (psi, delta) per angle; got " + " ".join(head[1:]))
     angs = ang_cols[0::2]
@@ -731,7 +749,7 @@ def read_jcamp(path, *, angle_deg: Optional[float] = None, percent: Optional[boo
         for k in ("title", "datatype", "data type", "origin", "owner", "spectrometer/data system", "xunits", "yunits")
         if k in d
     ) + (("angle_source", "given by the caller"), ("percent", str(bool(pct))))
-    return Measurement(
+    return _warn_implausible(path, Measurement(
         quantity=quantity,
         angles_deg=np.array([float(angle_deg)]),
         wavelength_nm=wl,
@@ -739,7 +757,7 @@ def read_jcamp(path, *, angle_deg: Optional[float] = None, percent: Optional[boo
         file_format="jcamp",
         source=str(path),
         metadata=meta,
-    )
+    ))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1013,10 +1031,10 @@ def read_measurement_csv(
         )
         normalized = saved.get("mueller_normalized", "false") == "true"
         meta = [(k[5:], v) for k, v in meta_pairs if k.startswith("meta.")]
-    return measurement_from_points(
+    return _warn_implausible(path, measurement_from_points(
         quantity, ang, wl, comps, sigma=sigma, extras=extras, where=str(path),
         mueller_normalized=normalized, metadata=tuple(meta), **fields,
-    )
+    ))
 
 
 def write_measurement_csv(path, measurement: Measurement) -> Path:

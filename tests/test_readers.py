@@ -79,6 +79,7 @@ def test_data_files_small_and_documented():
         assert path.name in readme, f"{path.name} has no provenance in examples/data/README.md"
 
 
+@pytest.mark.filterwarnings("ignore:.*transmittance spans")  # fixinc1: %T up to 112.9
 @pytest.mark.parametrize("path", list(ALL_FILES), ids=lambda p: p.name)
 def test_sniffing_picks_the_format(path):
     assert sniff_format(path) == ALL_FILES[path]
@@ -226,7 +227,8 @@ def test_jcamp_transmittance():
 
 
 def test_jcamp_percent_transmittance():
-    m = read_jcamp(JCAMP_PCT, angle_deg=0.0, percent=True)
+    with pytest.warns(UserWarning, match=r"transmittance spans \[-0.001987, 1.129\] .*outside \[0, 1\]"):
+        m = read_jcamp(JCAMP_PCT, angle_deg=0.0, percent=True)
     assert m.values.shape == (1, 3736)  # ##NPOINTS= 3736
     assert m.values[0, -1] == pytest.approx(1.128905654, rel=1e-6)  # ##FIRSTY= 112.89 %T at 399.26 cm-1
 
@@ -319,6 +321,7 @@ def test_native_oxide_thickness_as_the_sample_says(path):
 # ------------------------------------------------------------------------------------------
 # round trip through the measurement CSV
 # ------------------------------------------------------------------------------------------
+@pytest.mark.filterwarnings("ignore:.*transmittance spans")  # fixinc1: %T up to 112.9
 @pytest.mark.parametrize("path", list(ALL_FILES), ids=lambda p: p.name)
 def test_round_trip_is_identical(path, tmp_path):
     m = read_measurement(path, **_options(path))

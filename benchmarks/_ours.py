@@ -81,7 +81,7 @@ def coherent_rt(n, d, wavelengths, angles):
         layers=[ls.Layer(index(n[i + 1]), d[i]) for i in range(d.shape[0])],
         exit=ls.Substrate(index(n[-1])),
     )
-    out = ls.specular(stack, wavelengths, angles, both_sides=False)
+    out = ls.specular(stack, wavelengths, angle_rad=angles, both_sides=False)
     return jnp.moveaxis(out.R_front, -2, 0), jnp.moveaxis(out.T_front, -2, 0)
 
 

@@ -125,7 +125,7 @@ def plain_rule(reversed_stack, lam: float, totals) -> list[float]:
 
     rules = [plain_gauss_legendre_rule(int(n)) for n in totals]
     theta = np.arcsin(np.sqrt(np.concatenate([mu for mu, _ in rules])))
-    R = jax.jit(lambda th: ls.specular(reversed_stack, jnp.asarray([lam]), th, both_sides=False).natural().R_front[:, 0])
+    R = jax.jit(lambda th: ls.specular(reversed_stack, jnp.asarray([lam]), angle_rad=th, both_sides=False).natural().R_front[:, 0])
     R = np.asarray(R(jnp.asarray(theta)))
     out, start = [], 0
     for mu, w in rules:

@@ -74,7 +74,7 @@ def build(wl, dtype=None):
         return ls.reflectance(stack(h), wl, ls.Directional(45.0, 0.0))
 
     def specular(h):
-        return ls.specular(stack(h), wl, jnp.deg2rad(45.0), both_sides=False).natural().R_front
+        return ls.specular(stack(h), wl, angle_rad=jnp.deg2rad(45.0), both_sides=False).natural().R_front
 
     return model, specular, wl
 

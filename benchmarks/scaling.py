@@ -42,7 +42,7 @@ def coherent_problem(layers: int, wavelengths: int, angles: int):
 
     def R(d):
         stack = ls.Stack(1.0, [ls.Layer(2.35 if i % 2 == 0 else 1.46, d[i]) for i in range(layers)], ls.Substrate(1.52))
-        return ls.specular(stack, wl, th, both_sides=False).R_front
+        return ls.specular(stack, wl, angle_rad=th, both_sides=False).R_front
 
     return jax.jit(R), jax.jit(jax.value_and_grad(lambda d: jnp.mean(R(d)))), d
 

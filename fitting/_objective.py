@@ -23,41 +23,33 @@ reuses the compiled solver.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import Optional, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import (DEFAULT_NODES, ColourSpace, Ellipsometric, Geometry, LambertianBackground,
-                            LayerstackError, Stack, fixed_optics, reflectance)
-from layerstack_jax._geometry import BRDF, Directional, Specular, Sphere
+from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LambertianBackground, LayerstackError,
+                            LayerstackWarning, Stack, fixed_optics, reflectance)
 
 from ._parameters import Layout, Parameter, resolve_parameter
 
-__all__ = ["Dataset", "Objective", "resample"]
+__all__ = ["Dataset", "Objective", "resample", "NEGATIVE_READING_FLOOR"]
+
+#: Without σ, readings down to this (absolute, in the reading's unit) are accepted as noise
+#: around a dark, dark-corrected sample; below it they are an error.
+NEGATIVE_READING_FLOOR = 0.01
 
 
 def _geometry_label(g: Geometry) -> str:
-    if isinstance(g, Sphere):
-        return f"sphere:{float(g.incidence_deg):g}:{'sce' if g.specular == 'excluded' else 'sci'}"
-    if isinstance(g, BRDF):
-        return f"brdf:{float(g.incidence_deg):g}:{float(g.viewing_deg):g}"
-    if isinstance(g, Directional):
-        return f"{float(g.incidence_deg):g}/{float(g.viewing_deg):g}"
-    if isinstance(g, Specular):
-        return f"specular:{float(g.angle_deg):g}:{g.quantity}"
-    if isinstance(g, Ellipsometric):
-        return f"ellipsometry:{float(g.angle_deg):g}:{g.quantity}"
-    return type(g).__name__
+    """The geometry's own spelling (``Geometry.label``)."""
+    return g.label
 
 
 def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None, colour=None):
-    """What the instrument of geometry ``g`` reads: ψ/Δ for an ellipsometer, else
-    :func:`layerstack_jax.reflectance` (reusing ``optics``, a :class:`layerstack_jax.Optics`, if given),
+    """What the instrument of geometry ``g`` reads (:func:`layerstack_jax.reflectance`, reusing ``optics``, a :class:`layerstack_jax.Optics`, if given),
     converted to CIELAB by ``colour`` (a :class:`layerstack_jax.ColourSpace`) if given."""
-    if isinstance(g, Ellipsometric):
-        return g.measure(stack, grid)
     spectrum = reflectance(stack, grid, g, nodes=nodes, optics=optics)
     return spectrum if colour is None else colour.Lab(spectrum)
 
@@ -258,12 +250,21 @@ def _prepare(ds: Dataset, grid: np.ndarray, n_samples: Optional[int], index: int
         raise LayerstackError(
             f"{label}: NaN or infinite data at sample {s}, {wl_data[j]:g} nm; mask missing points (mask=False)"
         )
-    neg = used & (y < 0) & (not isinstance(ds.geometry, Ellipsometric))  # Δ, C, S may be < 0
-    if np.any(neg):
-        s, j = np.argwhere(neg)[0]
-        raise LayerstackError(
-            f"{label}: negative reflectance {y[s, j]:g} at sample {s}, {wl_data[j]:g} nm (data must be >= 0)"
-        )
+    if not ds.geometry.signed:  # Δ, C, S may be < 0; reflectances only by noise
+        # Dark-corrected readings of a dark sample scatter around 0: a reading is valid down to
+        # -5σ (σ given), or down to -NOISE_FLOOR (absolute) when no σ is given.
+        floor = -5.0 / weight if ds.sigma is not None else np.full(y.shape, -NEGATIVE_READING_FLOOR)
+        neg = used & (y < floor)
+        if np.any(neg):
+            s, j = np.argwhere(neg)[0]
+            allowed = "-5 sigma" if ds.sigma is not None else f"-{NEGATIVE_READING_FLOOR:g} without sigma"
+            raise LayerstackError(
+                f"{label}: reading {y[s, j]:g} at sample {s}, {wl_data[j]:g} nm is below {allowed} "
+                f"({floor[s, j]:.3g}): not noise around a dark reading; wrong baseline or units?"
+            )
+    if ds.geometry.reading_is_fraction and np.any(used & (y > 1.5)) and ds.colour is None:
+        warnings.warn(f"{label}: data up to {np.max(np.where(used, y, 0)):g} for a {ds.geometry.quantity_label} "
+                      "(a fraction, usually <= 1): percent given? divide by 100", LayerstackWarning, stacklevel=4)
     if ds.wavelength_nm is not None:
         y = resample(wl_data, np.where(mask, y, 0.0), grid, what=label)
         weight = resample(wl_data, weight, grid, what=label)
@@ -338,14 +339,11 @@ class Objective:
             return None
         out = []
         for ds in self.datasets:
-            if isinstance(ds.geometry, Ellipsometric):
-                out.append(None)
-            else:
-                try:
-                    stack = _bare(self.stack) if ds.bare else self.stack
-                    out.append(fixed_optics(stack, self.wavelength, ds.geometry, nodes=self.nodes))
-                except LayerstackError as e:
-                    raise LayerstackError(f"dataset {ds.label}: {e}") from None
+            try:
+                stack = _bare(self.stack) if ds.bare else self.stack
+                out.append(fixed_optics(stack, self.wavelength, ds.geometry, nodes=self.nodes))  # None: no optics
+            except LayerstackError as e:
+                raise LayerstackError(f"dataset {ds.label}: {e}") from None
         return tuple(out)
 
     # ----------------------------------------------------------------- data

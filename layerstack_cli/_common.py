@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from layerstack_jax import BRDF, Directional, Index, LambertianBackground, LayerstackError, Specular, Sphere, Stack, \
-    Tabulated, parse_geometry
+from layerstack_jax import Index, LambertianBackground, LayerstackError, Stack, Tabulated, parse_geometry
 
 PROG = "layerstack"
+
 
 @contextlib.contextmanager
 def _precision(float32: bool):
@@ -37,29 +37,13 @@ def _positive_int(text: str) -> int:
 
 
 def _parse_geometries(texts: list[str]) -> list[tuple[str, object]]:
-    """``[(column name, Geometry)]`` for the requested geometries, validated before any work.
-
-    ``specular:θ`` expands into three columns ``R_θ, T_θ, A_θ``; ``specular:θ:Q`` gives ``Q_θ``.
-    Other geometries give one column named after the geometry string.
-    """
+    """``[(column name, Geometry)]`` for the requested geometries, validated before any work
+    (each geometry names its own columns: ``specular:θ`` gives ``R_θ, T_θ, A_θ``)."""
     columns: list[tuple[str, object]] = []
     for text in texts:
         text = text.strip()
-        g = parse_geometry(text)  # raises LayerstackError with the list of accepted forms
-        angles = (g.angle_deg,) if isinstance(g, Specular) else (g.incidence_deg,) if isinstance(g, Sphere) else (
-            g.incidence_deg,
-            g.viewing_deg,
-        )
-        for a in angles:
-            if not 0.0 <= float(a) < 90.0:
-                raise LayerstackError(f"geometry {text!r}: angles must lie in [0, 90) degrees, got {float(a):g}")
-        if isinstance(g, Specular):
-            parts = text.split(":")
-            angle = parts[1].strip()
-            quantities = ("R", "T", "A") if len(parts) == 2 else (g.quantity,)
-            columns += [(f"{q}_{angle}", Specular(g.angle_deg, q)) for q in quantities]
-        else:
-            columns.append((text, g))
+        g = parse_geometry(text)  # raises LayerstackError with the accepted forms, or the bad angle
+        columns += g.prediction_columns(text)
     names = [name for name, _ in columns]
     for name in names:
         if names.count(name) > 1:
@@ -90,50 +74,43 @@ def _describe(stack: Stack) -> str:
 
 
 def _quantity_label(geometry) -> str:
-    if geometry is None:  # --ellipsometry columns
-        return "degrees"
-    if isinstance(geometry, BRDF):
-        return "BRDF (1/sr)"
-    if isinstance(geometry, Directional):
-        return "reflectance factor"
-    if isinstance(geometry, Sphere):
-        return "reflectance"
-    return {"R": "reflectance", "T": "transmittance", "A": "absorptance"}[geometry.quantity]
+    """What a column holds: the geometry's own ``quantity_label``; "degrees" for ψ/Δ columns."""
+    return "degrees" if geometry is None else geometry.quantity_label
 
 
 def _plot(path: Path, wavelength, columns: dict, geometries: dict, title: str, subtitle: str) -> None:
-    """Spectra as a PNG (matplotlib object API with the Agg canvas: no global backend change)."""
+    """Spectra as a PNG (matplotlib object API with the Agg canvas: no global backend change).
+    Columns are grouped by what they hold (reflectance, reflectance factor, BRDF (1/sr) …): the
+    first group on the left axis, a second on a right axis; legends name the columns."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 4.8), dpi=120, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    brdf = [name for name in columns if isinstance(geometries[name], BRDF)]
-    others = [name for name in columns if name not in brdf]
-    ax_brdf = ax if not others else (ax.twinx() if brdf else None)
-    styles = {"R": "-", "T": "--", "A": ":"}
+    kinds = list(dict.fromkeys(_quantity_label(geometries[n]) for n in columns))
+    fractions = [k for k in kinds if k in ("reflectance", "transmittance", "absorptance", "reflectance factor")]
+    left = fractions or kinds[:1]
+    right = [k for k in kinds if k not in left]
+    ax_right = ax.twinx() if right else None
+    styles = {"transmittance": "--", "absorptance": ":"}
     lines = []
-    for i, name in enumerate(others + brdf):
-        g = geometries[name]
-        target = ax_brdf if name in brdf else ax
-        style = styles[g.quantity] if isinstance(g, Specular) else "-"
-        label = f"{name} ({_quantity_label(g)})" if name in brdf and others else name
-        (line,) = target.plot(wavelength, columns[name], style, color=f"C{i}", lw=1.8, label=label)
+    for i, name in enumerate(columns):
+        kind = _quantity_label(geometries[name])
+        target = ax if kind in left else ax_right
+        label = f"{name} ({kind})" if right else name
+        (line,) = target.plot(wavelength, columns[name], styles.get(kind, "-"), color=f"C{i}", lw=1.8, label=label)
         lines.append(line)
-    kinds = list(dict.fromkeys(_quantity_label(geometries[n]) for n in others))
     ax.set_xlabel("wavelength (nm)")
-    ax.set_ylabel(" / ".join(kinds) if others else "BRDF (1/sr)")
-    if brdf and others:
-        ax_brdf.set_ylabel("BRDF (1/sr)")
-        ax_brdf.set_ylim(bottom=0)
+    ax.set_ylabel(" / ".join(left))
+    if ax_right is not None:
+        ax_right.set_ylabel(" / ".join(right))
     if len(wavelength) > 1:
         ax.set_xlim(float(wavelength[0]), float(wavelength[-1]))
-    lo = min(float(np.nanmin(columns[n])) for n in (others or brdf))
-    ax.set_ylim(bottom=min(0.0, lo))
+    if all(k != "degrees" for k in left):
+        lo = min(float(np.nanmin(columns[n])) for n in columns if _quantity_label(geometries[n]) in left)
+        ax.set_ylim(bottom=min(0.0, lo))
     ax.grid(True, alpha=0.3)
     ax.legend(handles=lines, loc="best", frameon=False)
     ax.set_title(f"{title}\n{subtitle}", fontsize=10)
     fig.savefig(path)
-
-

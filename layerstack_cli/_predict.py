@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from layerstack_jax import BRDF, DEFAULT_NODES, LayerstackError, check_stack, ellipsometry, reflectance
+from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, ellipsometry, reflectance
 from layerstack_jax.io import load_stack, parse_wavelengths, save_spectra_csv
 
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _precision
@@ -43,21 +43,6 @@ def _add_predict_parser(sub) -> None:
     p.set_defaults(func=_cmd_predict)
 
 
-def _polarized_columns(stack, wavelength, name, geometry, polarization, nodes) -> dict:
-    """Columns for ``--polarization`` of one brdf:I:V geometry (diffuse part, 1/sr)."""
-    from layerstack_jax import diffuse_mueller, polarized_brdf
-
-    if not isinstance(geometry, BRDF):
-        raise LayerstackError(f"geometry {name!r}: --polarization applies to brdf:I:V geometries only")
-    i, v = geometry.incidence_deg, geometry.viewing_deg
-    if polarization == "mueller":
-        M = np.asarray(diffuse_mueller(stack, wavelength, i, v, nodes=nodes), dtype=float)
-        return {f"{name}_m{a}{b}": M[a, b] for a in range(4) for b in range(4)}
-    f = np.asarray(polarized_brdf(stack, wavelength, i, v, nodes=nodes), dtype=float)
-    a, b = ("sp".index(c) for c in polarization)
-    return {f"{name}_{polarization}": f[a, b]}
-
-
 def _cmd_predict(args) -> int:
     start = time.perf_counter()
     wavelength = parse_wavelengths(args.wavelengths)
@@ -68,7 +53,7 @@ def _cmd_predict(args) -> int:
             check_stack(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
         except LayerstackError as e:
             raise LayerstackError(f"{args.stack}: {e}") from None
-        if args.polarization and not any(isinstance(g, BRDF) for _, g in requested):
+        if args.polarization and not any(g.supports_polarization for _, g in requested):
             raise LayerstackError("--polarization needs at least one brdf:I:V geometry")
         columns, geometries = {}, {}
         for name, geometry in requested:
@@ -78,9 +63,9 @@ def _cmd_predict(args) -> int:
                 values = reflectance(stack, wavelength, geometry, nodes=args.nodes)
             except LayerstackError as e:
                 raise LayerstackError(f"geometry {name!r}: {e}") from None
-            if args.polarization and isinstance(geometry, BRDF):
+            if args.polarization and geometry.supports_polarization:
                 try:
-                    extra = _polarized_columns(stack, wavelength, name, geometry, args.polarization, args.nodes)
+                    extra = geometry.polarized_columns(stack, wavelength, name, args.polarization, args.nodes)
                 except LayerstackError as e:
                     raise LayerstackError(f"--polarization: {e}") from None
                 columns.update(extra)

@@ -5,8 +5,8 @@ Fresnel multiple reflections per polarization), any mix of the two, over a specu
 a Lambertian background, for integrating-sphere, radiance-detector, BRDF and specular
 geometries; jit-, vmap- and grad-compatible throughout.
 
-Units: wavelengths and thicknesses in nm, absorption coefficients α in 1/nm, angles in radians in
-functions and degrees in geometry objects. Index convention n + ik with k ≥ 0 (time dependence
+Units: wavelengths and thicknesses in nm, absorption coefficients α in 1/nm, angles in degrees at
+every public surface (functions and geometry objects; :func:`specular` also takes ``angle_rad=``). Index convention n + ik with k ≥ 0 (time dependence
 exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 yourself for
 interference-grade accuracy (see README, "Precision").
 """
@@ -30,25 +30,27 @@ from ._ellipsometry import psi_delta as psi_delta
 from ._ellipsometry import reflection_amplitudes as reflection_amplitudes
 from ._fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._fresnel import normal_wavevector as normal_wavevector
+from ._illumination import Diffuse as Diffuse
+from ._illumination import Response as Response
+from ._illumination import diffuse as diffuse
+from ._illumination import snell_invariant as snell_invariant
+from ._illumination import specular as specular
 from ._geometry import BRDF as BRDF
-from ._geometry import Diffuse as Diffuse
 from ._geometry import Directional as Directional
 from ._geometry import Geometry as Geometry
-from ._geometry import Optics as Optics
-from ._geometry import Response as Response
 from ._geometry import Specular as Specular
 from ._geometry import Sphere as Sphere
-from ._geometry import diffuse as diffuse
 from ._geometry import fixed_optics as fixed_optics
+from ._geometry import geometry_kinds as geometry_kinds
 from ._geometry import invert_background as invert_background
 from ._geometry import parse_geometry as parse_geometry
 from ._geometry import reflectance as reflectance
-from ._geometry import specular as specular
 from ._materials import Cauchy as Cauchy
 from ._materials import Index as Index
 from ._materials import Material as Material
 from ._materials import Sellmeier as Sellmeier
 from ._materials import Tabulated as Tabulated
+from ._optics import Optics as Optics
 from ._polarimetry import apply_mueller as apply_mueller
 from ._polarimetry import cloude_eigenvalues as cloude_eigenvalues
 from ._polarimetry import coherency_matrix as coherency_matrix
@@ -72,6 +74,7 @@ from ._stack import Substrate as Substrate
 from ._stack import TabulatedSpectrum as TabulatedSpectrum
 from ._stack import check_stack as check_stack
 from ._validate import LayerstackError as LayerstackError
+from ._validate import LayerstackWarning as LayerstackWarning
 from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack
 from .io import parse_wavelengths as parse_wavelengths

@@ -47,7 +47,7 @@ import numpy as np
 
 from ._custom_types import Array, Float, RealLike
 from ._ellipsometry import _check_angle_deg
-from ._geometry import _diffuse_resolved
+from ._illumination import diffuse_resolved as _diffuse_resolved
 from ._quadrature import DEFAULT_NODES, unit_rule
 from ._response import natural, stack_intensities
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve

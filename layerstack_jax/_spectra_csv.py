@@ -6,6 +6,7 @@ header), :func:`read_spectra_csv` (``wavelength_nm`` then one column per spectru
 
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -15,6 +16,12 @@ import numpy as np
 from ._validate import LayerstackError
 
 __all__ = ["read_csv_columns", "read_spectra_csv", "save_spectra_csv", "parse_wavelengths"]
+
+
+def _fields(line: str) -> list[str]:
+    """The comma-separated fields of one CSV line, quotes removed (R's ``write.csv`` and Excel
+    quote headers: ``"wavelength_nm","sample 1"``), surrounding spaces stripped."""
+    return [f.strip() for f in next(csv.reader([line], skipinitialspace=True))]
 
 
 def content_lines(path: Path) -> list[tuple[int, str]]:
@@ -34,7 +41,7 @@ def numeric_rows(path, lines, names) -> np.ndarray:
     problem raises :class:`LayerstackError` naming the file and line."""
     rows = []
     for line_no, line in lines:
-        fields = [f.strip() for f in line.split(",")]
+        fields = _fields(line)
         if len(fields) != len(names):
             raise LayerstackError(f"{path}: line {line_no}: {len(fields)} fields for {len(names)} columns ({', '.join(names)})")
         try:
@@ -66,7 +73,7 @@ def read_csv_columns(path, required: Iterable[str], optional: Iterable[str] = ()
     if not lines:
         raise LayerstackError(f"{path}: empty file (expected a header row {expected} and data rows)")
     header_line, header = lines[0]
-    names = [h.strip().lower() for h in header.split(",")]
+    names = [h.lower() for h in _fields(header)]
 
     def _is_float(s):
         try:
@@ -103,8 +110,11 @@ def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     if not lines:
         raise LayerstackError(f"{path}: empty file (expected a header wavelength_nm,<spectrum names…> and data rows)")
     header_line, header = lines[0]
-    names = [h.strip() for h in header.split(",")]
-    if not names or names[0].lower() != "wavelength_nm":
+    names = _fields(header)
+    drop_row_names = len(names) > 1 and names[0] == "" and names[1].lower() == "wavelength_nm"
+    if drop_row_names:  # R's write.csv writes row names first, under an empty header
+        names = ["row_name"] + names[1:]
+    elif not names or names[0].lower() != "wavelength_nm":
         raise LayerstackError(f"{path}: line {header_line}: the first column must be wavelength_nm, got {names[0]!r}")
     if len(names) < 2:
         raise LayerstackError(f"{path}: line {header_line}: no spectrum column after wavelength_nm")
@@ -114,6 +124,8 @@ def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         if names.count(n) > 1:
             raise LayerstackError(f"{path}: line {header_line}: column {n!r} appears twice")
     data = numeric_rows(path, lines[1:], names)
+    if drop_row_names:
+        data, names = data[:, 1:], names[1:]
     wl = data[:, 0]
     if np.any(wl <= 0) or np.any(np.diff(wl) <= 0):
         raise LayerstackError(f"{path}: wavelength_nm must be > 0 and increase strictly")

@@ -10,6 +10,7 @@ differentiated.
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple, Optional, Union
 
 import equinox as eqx
@@ -17,7 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._materials import Index, Material, Tabulated, as_material
-from ._validate import LayerstackError, check_nonnegative, check_unit_interval, is_concrete
+from ._validate import (LayerstackError, LayerstackWarning, check, check_nonnegative, check_positive, check_unit_interval,
+                        is_concrete, warn_if_implausible)
 
 __all__ = [
     "Layer",
@@ -165,36 +167,80 @@ class ResolvedStack(NamedTuple):
     wavelength: object
 
 
+def _check_index(name: str, n):
+    """A medium's complex index n + ik, checked: finite, n > 0, k ≥ 0 (convention n + ik)."""
+    return check(name, n, lambda a, xp: ~xp.isfinite(a) | (xp.real(a) <= 0) | (xp.imag(a) < 0),
+                 "must have n > 0 and k >= 0 (convention n + ik)")
+
+
+def _warn_implausible(stack: Stack, wl, n: tuple) -> None:
+    """Plausibility warnings on concrete inputs (issue: "implausible input gets a warning")."""
+    warn_if_implausible("wavelength_nm", wl, lambda a: (a < 100) | (a > 50_000),
+                        "outside 100 nm - 50 µm: wavelengths are in nm (µm given?)")
+    if not is_concrete(wl) or np.size(wl) < 2:
+        return
+    w = np.asarray(wl, float)
+    step = float(np.max(np.diff(w)))
+    for i, (layer, ni) in enumerate(zip(stack.layers, n[1:-1])):
+        label = f"layers[{i}] ({layer.name or 'unnamed'})"
+        if layer.coherent and is_concrete((layer.thickness, ni)):
+            # interference fringes of period λ²/(2 n d) in wavelength; fewer than 2 grid points
+            # per fringe and the computed spectrum aliases (float32 and float64 then disagree)
+            optical = 2.0 * np.max(np.real(np.asarray(ni))) * np.max(np.asarray(layer.thickness, float))
+            period = float(np.min(w)) ** 2 / max(optical, 1e-300)
+            if period < 2.0 * step:
+                warnings.warn(
+                    f"{label}: coherent film of {np.max(np.asarray(layer.thickness, float)):g} nm has fringes every "
+                    f"{period:.3g} nm, finer than twice the grid step ({step:g} nm): the spectrum aliases; "
+                    "should it be coherent = false (a thick layer)?", LayerstackWarning, stacklevel=3)
+        if layer.alpha is not None and is_concrete(ni) and np.any(np.imag(np.asarray(ni)) > 0):
+            warnings.warn(f"{label}: both k (in the index) and alpha are given; their absorptions add "
+                          "(alpha_total = alpha + 4 pi k / lambda): give one of them", LayerstackWarning, stacklevel=3)
+
+
 def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
-    """Sample every material and spectrum of ``stack`` on ``wavelength_nm`` (nm)."""
-    wl = jnp.asarray(wavelength_nm)
+    """Sample every material and spectrum of ``stack`` on ``wavelength_nm`` (nm), checking every
+    physical constraint on the way — eagerly on concrete values, with ``equinox.error_if`` on
+    traced ones (:mod:`layerstack_jax._validate`): λ > 0, n > 0, k ≥ 0, thickness ≥ 0, α ≥ 0,
+    0 ≤ ρg ≤ 1, each message naming the field."""
+    wl = jnp.asarray(wavelength_nm) if not is_concrete(wavelength_nm) else np.asarray(wavelength_nm)
     if wl.ndim != 1:
         raise LayerstackError(f"wavelength_nm must be 1-D, got shape {wl.shape}")
-    if is_concrete(wl):
-        w = np.asarray(wl)
-        if np.any(~np.isfinite(w)) or np.any(w <= 0):
-            raise LayerstackError("wavelength_nm must be finite and > 0")
+    wl = jnp.asarray(check_positive("wavelength_nm (nm)", wl))
+    names = ("ambient index", *(f"layers[{i}] ({layer.name or 'unnamed'}): index" for i, layer in enumerate(stack.layers)),
+             "exit index")
     n = tuple(
-        m(wl)  # numpy when concrete: lets static work (critical angles) happen at trace time
-        for m in (stack.ambient, *(layer.index for layer in stack.layers), stack.exit.index)
+        _check_index(name, m(wl))  # numpy when concrete: lets static work (critical angles) happen at trace time
+        for name, m in zip(names, (stack.ambient, *(layer.index for layer in stack.layers), stack.exit.index))
     )
-    for i, (ni, layer) in enumerate(zip(n[1:-1], stack.layers)):
-        if is_concrete(ni):
-            k = np.imag(np.asarray(ni))
-            if np.any(k < 0):
-                raise LayerstackError(f"layers[{i}] ({layer.name or 'unnamed'}): k must be >= 0 (convention n + ik)")
+    _warn_implausible(stack, wl, n)
     rho_g = None
     if isinstance(stack.exit, LambertianBackground):
-        rho_g = as_spectrum(stack.exit.reflectance, wl)
-        check_unit_interval("background reflectance rho_g", rho_g)
+        rho_g = _on_grid("background reflectance rho_g", as_spectrum(stack.exit.reflectance, wl), wl)
+        rho_g = check_unit_interval("background reflectance rho_g", rho_g)
+    d, alpha = [], []
+    for i, layer in enumerate(stack.layers):
+        label = f"layers[{i}] ({layer.name or 'unnamed'})"
+        d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", layer.thickness)))
+        a = None if layer.alpha is None else _on_grid(f"{label}: alpha (1/nm)", as_spectrum(layer.alpha, wl), wl)
+        alpha.append(None if a is None else check_nonnegative(f"{label}: alpha (1/nm)", a))
     return ResolvedStack(
         n=n,
-        d=tuple(jnp.asarray(layer.thickness) for layer in stack.layers),
-        alpha=tuple(None if layer.alpha is None else as_spectrum(layer.alpha, wl) for layer in stack.layers),
+        d=tuple(d),
+        alpha=tuple(alpha),
         coherent=stack.coherent,
         rho_g=rho_g,
         wavelength=wl,
     )
+
+
+def _on_grid(name: str, x, wl):
+    """A spectrum given as an array must end on the wavelength axis: ``(..., wl)`` or ``(..., 1)``."""
+    shape = jnp.shape(x)
+    if shape and shape[-1] not in (1, wl.shape[-1]):
+        raise LayerstackError(f"{name}: an array spectrum must have {wl.shape[-1]} values (one per wavelength) "
+                              f"on its last axis, got shape {shape}")
+    return x
 
 
 def check_stack(stack: Stack, wavelength_nm) -> None:

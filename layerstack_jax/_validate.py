@@ -1,48 +1,116 @@
-"""Input validation that names the offending field. Checks run on concrete values only;
-traced values (inside jit / grad) are checked with ``equinox.error_if`` where it matters."""
+"""Input validation that names the offending field, eagerly *and* under ``jit``/``grad``.
+
+Every check returns its input. On concrete values (plain Python, NumPy, or JAX arrays outside a
+transformation) a violation raises :class:`LayerstackError` at once. On traced values (inside
+``jax.jit``, ``jax.grad``, ``jax.vmap`` …) the value is returned wrapped by
+:func:`equinox.error_if` with the same message, so the violation raises when the compiled
+function runs (as an ``equinox`` runtime error whose text names the field) instead of returning
+a number. Callers must *use the returned value* for the traced check to take effect: the
+choke point is :func:`layerstack_jax._stack.resolve`, through which every public function
+samples a stack.
+
+Plausibility checks (:func:`warn_if_implausible`) only warn, naming the field and the likely
+mistake (µm given for nm, percent for a fraction).
+"""
 
 from __future__ import annotations
 
+import warnings
+from typing import Callable
+
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["is_concrete", "check_nonnegative", "check_finite", "check_unit_interval", "LayerstackError"]
+__all__ = [
+    "LayerstackError",
+    "LayerstackWarning",
+    "is_concrete",
+    "check",
+    "check_finite",
+    "check_nonnegative",
+    "check_positive",
+    "check_unit_interval",
+    "check_angle_deg",
+    "warn_if_implausible",
+]
 
 
 class LayerstackError(ValueError):
     """Raised for invalid physical input (the message names the field)."""
 
 
+class LayerstackWarning(UserWarning):
+    """Implausible but possible input (the message names the field and the likely mistake)."""
+
+
 def is_concrete(x) -> bool:
+    """True when no leaf of ``x`` is a JAX tracer (its values can be inspected now)."""
     leaves = jax.tree_util.tree_leaves(x)
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
-def _as_numpy(x):
-    return np.asarray(x)
+def _range_text(a: np.ndarray) -> str:
+    a = np.asarray(a)
+    if a.size == 1:
+        return repr(a.reshape(()).item())
+    if np.iscomplexobj(a):
+        return f"values in [{a.real.min()!r}, {a.real.max()!r}] + i[{a.imag.min()!r}, {a.imag.max()!r}]"
+    return f"range [{np.nanmin(a)!r}, {np.nanmax(a)!r}]" if np.any(np.isfinite(a)) else "no finite value"
 
 
-def check_finite(name: str, x) -> None:
+def check(name: str, x, bad: Callable, what: str):
+    """``x``, checked: ``bad(a, xp)`` (``xp`` = numpy or jax.numpy) marks the invalid entries.
+
+    Concrete ``x``: raises ``LayerstackError("<name> <what>, got <values>")`` if any entry is
+    bad. Traced ``x``: returns ``equinox.error_if(x, any(bad), "<name> <what>")``. None passes.
+    """
+    if x is None:
+        return None
+    if is_concrete(x):
+        a = np.asarray(x)
+        if np.any(bad(a, np)):
+            raise LayerstackError(f"{name} {what}, got {_range_text(a)}")
+        return x
+    xj = jnp.asarray(x)
+    return eqx.error_if(xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
+
+
+def check_finite(name: str, x):
+    """``x`` with no NaN or infinite entry."""
+    return check(name, x, lambda a, xp: ~xp.isfinite(a), "must be finite (no NaN or infinity)")
+
+
+def check_nonnegative(name: str, x, what: str = "must be >= 0"):
+    """``x`` finite and ≥ 0 (thickness, α, k …)."""
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0), f"{what} and finite")
+
+
+def check_positive(name: str, x, what: str = "must be > 0"):
+    """``x`` finite and > 0 (wavelengths, real parts of indices)."""
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a <= 0), f"{what} and finite")
+
+
+def check_unit_interval(name: str, x):
+    """``x`` finite and in [0, 1] (ρg, fractions)."""
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0) | (a > 1), "must lie in [0, 1]")
+
+
+def check_angle_deg(name: str, x, *, grazing: bool = False):
+    """An angle from the normal in degrees, in [0, 90) — an instrument's angle (grazing light
+    carries no power in) — or in [0, 90] with ``grazing=True`` (a function of the angle, where
+    90° is a valid limit: R = 1, T = 0; a rounding excess of 1e-9° is tolerated)."""
+    if grazing:
+        return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0) | (a > 90 + 1e-9), "must lie in [0, 90] degrees")
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0) | (a >= 90), "must lie in [0, 90) degrees")
+
+
+def warn_if_implausible(name: str, x, implausible: Callable, likely: str) -> None:
+    """Warn (:class:`LayerstackWarning`) when concrete ``x`` has an entry marked by
+    ``implausible(a)`` (numpy); ``likely`` says the probable mistake. Traced values pass."""
     if x is None or not is_concrete(x):
         return
-    a = _as_numpy(x)
-    if not np.all(np.isfinite(a)):
-        raise LayerstackError(f"{name} contains NaN or infinite values")
-
-
-def check_nonnegative(name: str, x, what: str = "must be >= 0") -> None:
-    if x is None or not is_concrete(x):
-        return
-    check_finite(name, x)
-    a = _as_numpy(x)
-    if np.any(a < 0):
-        raise LayerstackError(f"{name} {what}, got min {a.min()!r}")
-
-
-def check_unit_interval(name: str, x) -> None:
-    if x is None or not is_concrete(x):
-        return
-    check_finite(name, x)
-    a = _as_numpy(x)
-    if np.any(a < 0) or np.any(a > 1):
-        raise LayerstackError(f"{name} must lie in [0, 1], got range [{a.min()!r}, {a.max()!r}]")
+    a = np.asarray(x)
+    if np.any(implausible(a)):
+        warnings.warn(f"{name}: {_range_text(a)}: {likely}", LayerstackWarning, stacklevel=3)

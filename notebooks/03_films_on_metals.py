@@ -132,7 +132,7 @@ theta = np.radians(theta_deg)
 @jax.jit
 def reflect(batch, angle_rad):
     """R and T (into the substrate) of every stack, shaped (stack, angle, 2 (s, p), wl)."""
-    response = jax.vmap(lambda stack: ls.specular(stack, wl, angle_rad, both_sides=False))(batch)
+    response = jax.vmap(lambda stack: ls.specular(stack, wl, angle_rad=angle_rad, both_sides=False))(batch)
     return response.R_front, response.T_front
 
 

@@ -84,7 +84,7 @@ def _tmm_reference(n, d, ang, wl):
 
 @jax.jit
 def _batched_specular(stacks, wl, ang):
-    return jax.vmap(lambda st, w, a: ls.specular(st, w, a))(stacks, wl, ang)
+    return jax.vmap(lambda st, w, a: ls.specular(st, w, angle_rad=a))(stacks, wl, ang)
 
 
 def _run_group(items):
@@ -149,8 +149,8 @@ def test_zero_thickness_index_matched_padding_is_a_no_op():
     rng = np.random.default_rng(7)
     n, d, ang, wl = _random_coherent_stack(rng, 3)
     n_pad, d_pad, _, _ = pad_index_matched(n, d, 5, rng)
-    a = ls.specular(build_stack(n, d), wl, ang)
-    b = ls.specular(build_stack(n_pad, d_pad), wl, ang)
+    a = ls.specular(build_stack(n, d), wl, angle_rad=ang)
+    b = ls.specular(build_stack(n_pad, d_pad), wl, angle_rad=ang)
     for x, y in zip(a, b):
         assert max_abs(x, y) <= 1e-14
 
@@ -194,7 +194,7 @@ def test_bare_interface_fresnel_and_tir():
     """No layer at all: Fresnel per polarization from both sides, exact TIR beyond θc."""
     ang = np.deg2rad([0.0, 10.0, 30.0, 41.0, 42.0, 50.0, 70.0, 89.9])
     for n0, n1 in ((1.0, 1.5), (1.5, 1.0), (1.33, 2.4)):
-        out = ls.specular(build_stack([n0, n1], [INF, INF]), jnp.array([500.0]), ang)
+        out = ls.specular(build_stack([n0, n1], [INF, INF]), jnp.array([500.0]), angle_rad=ang)
         Rs, Rp, _ = ref.fresnel_natural_R(n0, n1, ang)
         assert max_abs(out.R_front[:, 0, 0], Rs) <= TOL
         assert max_abs(out.R_front[:, 1, 0], Rp) <= TOL
@@ -283,7 +283,7 @@ def test_exact_critical_angle_of_a_film():
     Same for an absorbing film below the critical one."""
     th_c = math.asin(1.0 / 1.5)
     for n, d in (([1.5, 1.0, 1.5], [INF, 100.0, INF]), ([1.5, 1.0, 2.0 + 0.3j, 1.2], [INF, 80.0, 40.0, INF])):
-        out = ls.specular(build_stack(n, d), jnp.array([450.0]), jnp.array([th_c]))
+        out = ls.specular(build_stack(n, d), jnp.array([450.0]), angle_rad=jnp.array([th_c]))
         for ip, pol in enumerate("sp"):
             Ra, Ta = _abeles_R_T(pol, n, d, 1.0, 450.0)
             assert abs(float(out.R_front[0, ip, 0]) - Ra) <= 1e-9, (n, pol, float(out.R_front[0, ip, 0]), Ra)
@@ -297,7 +297,7 @@ def test_ten_micron_metal_layer_is_bulk_metal(nk):
     n0, ns = 1.0, 1.5
     ang = np.deg2rad([0.0, 30.0, 60.0, 85.0, 89.9])
     wl = np.array([400.0, 550.0, 700.0])
-    out = ls.specular(build_stack([n0, nk, ns], [INF, 10_000.0, INF]), jnp.asarray(wl), jnp.asarray(ang))
+    out = ls.specular(build_stack([n0, nk, ns], [INF, 10_000.0, INF]), jnp.asarray(wl), angle_rad=jnp.asarray(ang))
     for x in out:
         assert np.all(np.isfinite(np.asarray(x)))
 
@@ -348,11 +348,11 @@ def test_lossless_energy_conservation_and_normal_incidence_s_equals_p():
 def test_output_shapes_and_scalar_angle():
     st = build_stack([1.0, 1.4 + 0.1j, 1.5], [INF, 100.0, INF])
     wl = jnp.linspace(400.0, 700.0, 4)
-    assert ls.specular(st, wl, 0.3).R_front.shape == (2, 4)
-    assert ls.specular(st, wl, jnp.zeros((3, 5))).T_back.shape == (3, 5, 2, 4)
-    out = ls.specular(st, wl, 0.3, both_sides=False)
+    assert ls.specular(st, wl, angle_rad=0.3).R_front.shape == (2, 4)
+    assert ls.specular(st, wl, angle_rad=jnp.zeros((3, 5))).T_back.shape == (3, 5, 2, 4)
+    out = ls.specular(st, wl, angle_rad=0.3, both_sides=False)
     assert out.R_back is None and out.T_back is None
-    nat = ls.specular(st, wl, jnp.array([0.3])).natural()
+    nat = ls.specular(st, wl, angle_rad=jnp.array([0.3])).natural()
     assert nat.R_front.shape == (1, 4)
     Rr, Tr = ref.coh_stack_R_T("u", [1.0, 1.4 + 0.1j, 1.5], [INF, 100.0, INF], 0.3, 400.0)
     assert abs(float(nat.R_front[0, 0]) - Rr) <= TOL and abs(float(nat.T_front[0, 0]) - Tr) <= TOL
@@ -378,7 +378,7 @@ def test_dispersion_models_feed_the_engine():
         ],
         ls.Substrate(ls.Sellmeier(list(B), list(C))),
     )
-    out = ls.specular(models, jnp.asarray(wl), jnp.array([0.0, 0.7]))
+    out = ls.specular(models, jnp.asarray(wl), angle_rad=jnp.array([0.0, 0.7]))
     for iw, lam in enumerate(wl):
         n = [1.0, n_cauchy[iw] + 0.01j, n_tab[iw], n_bk7[iw]]
         d = [INF, 120.0, 60.0, INF]

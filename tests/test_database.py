@@ -179,7 +179,7 @@ def test_stack_of_database_materials_vs_tmm():
     stack = stack_from_dict(d)
     wl = np.linspace(450.0, 750.0, 31)
     angle = math.radians(30.0)
-    R = np.asarray(ls.specular(stack, wl, angle, both_sides=False).natural().R_front)
+    R = np.asarray(ls.specular(stack, wl, angle_rad=angle, both_sides=False).natural().R_front)
     n_sio2, _ = _reference("main", "SiO2", "Malitson", wl)
     n_tio2, _ = _reference("main", "TiO2", "Devore-o", wl)
     n_au, _ = _reference("main", "Au", "Johnson", wl)
@@ -193,7 +193,7 @@ def test_stack_of_database_materials_vs_tmm():
     np.testing.assert_allclose(R, want, rtol=0, atol=1e-12)
     # outside Devore's range (430–1530 nm) the prediction refuses
     with pytest.raises(ls.LayerstackError, match="outside the data range"):
-        ls.specular(stack, np.array([400.0, 500.0]), angle)
+        ls.specular(stack, np.array([400.0, 500.0]), angle_rad=angle)
 
 
 def test_shipped_example_with_database_materials():

@@ -82,8 +82,12 @@ def test_cli_fit_recovers_thickness(tmp_path, capsys):
     code = main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", str(out), "--plot", str(png)])
     text = capsys.readouterr().out
     assert code == 0, text
-    assert "layerstack fit report" in text and "### b" in text
+    # several spectra: one summary line each (no report per column unless --report all),
+    # headed by the geometry and the origin of sigma
+    assert "geometry: specular:0:T (transmittance; given (-g))" in text and "sigma: estimated from the residuals" in text
+    assert "layerstack fit report" not in text and sum(line.strip().startswith(("a ", "b ")) for line in text.splitlines()) == 2
     d = json.loads(out.read_text())
+    assert d["geometry"] == "specular:0:T" and d["sigma_origin"].startswith("estimated")
     h = [f["parameters"]["thickness_nm[slab]"]["value"] for f in d["fits"]]
     np.testing.assert_allclose(h, [10_000.0, 12_500.0], rtol=1e-8)
     assert png.stat().st_size > 10_000
@@ -101,7 +105,7 @@ def test_cli_fit_errors(tmp_path, capsys):
     # negative data
     save_spectra_csv(data, WL, {"a": _truth(10_000.0, 2e-5) - 0.95})
     assert main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", out]) == 2
-    assert "negative reflectance" in capsys.readouterr().err
+    assert "below -0.01 without sigma" in capsys.readouterr().err
     # no free parameter
     plain = tmp_path / "p.toml"
     plain.write_text(STACK.format(alpha="2e-5").replace("{ value = 8000, free = true, min = 0, max = 1e5 }", "8000"))

@@ -68,7 +68,7 @@ def _model_a(p):
         ],
         ls.Substrate(ls.Index(p["ns"], p["ks"])),
     )
-    out = ls.specular(st, WL, jnp.stack([p["theta"], 0.2]))
+    out = ls.specular(st, WL, angle_rad=jnp.stack([p["theta"], 0.2]))
     w = jnp.arange(1.0, 1.0 + WL.size)
     return jnp.sum(w * (out.R_front + 0.7 * out.T_front + 0.3 * out.R_back))
 
@@ -180,7 +180,7 @@ def test_no_nan_gradients_at_critical_grazing_and_90():
             ],
             ls.Substrate(ls.Index(p["ns"])),
         )
-        out = ls.specular(st, WL, p["theta"])
+        out = ls.specular(st, WL, angle_rad=p["theta"])
         return jnp.sum(out.R_front + out.T_front + out.R_back + out.T_back)
 
     theta = jnp.array([TH_C, math.radians(89.9), math.pi / 2])
@@ -197,7 +197,7 @@ def test_no_nan_gradients_at_the_exact_critical_angle_of_a_bare_interface():
 
     def f(theta, n_exit):
         st = ls.Stack(1.5, [], ls.Substrate(ls.Index(n_exit)))
-        return jnp.sum(ls.specular(st, WL[:1], theta).R_front)
+        return jnp.sum(ls.specular(st, WL[:1], angle_rad=theta).R_front)
 
     v, g = jax.jit(jax.value_and_grad(f, argnums=(0, 1)))(jnp.asarray(TH_C), jnp.asarray(1.0))
     assert _all_finite(v) and _all_finite(g)
@@ -249,7 +249,7 @@ def test_vmap_over_thickness_samples_equals_loop_and_jit():
 
     def f(d, h, th):
         st = _fit_stack(d, h, 0.6)
-        return ls.reflectance(st, WL, ls.Sphere(8.0, "included")), ls.specular(st, WL, th).R_front
+        return ls.reflectance(st, WL, ls.Sphere(8.0, "included")), ls.specular(st, WL, angle_rad=th).R_front
 
     fj = jax.jit(f)
     batched = jax.jit(jax.vmap(f))(d, h, th)
@@ -284,7 +284,7 @@ def test_one_compilation_per_model_shape():
         assert out.shape == (WL.size,) and _all_finite(out)
 
     # plain jax.jit with Python-float leaves: they are traced too
-    f = jax.jit(lambda d, n: ls.specular(ls.Stack(1.0, [ls.Layer(n, d)], ls.Substrate(1.5)), WL, 0.3).R_front)
+    f = jax.jit(lambda d, n: ls.specular(ls.Stack(1.0, [ls.Layer(n, d)], ls.Substrate(1.5)), WL, angle_rad=0.3).R_front)
     for d, n in ((10.0, 1.4), (120.0, 2.2), (300.0, 1.7)):
         f(d, n)
     assert f._cache_size() == 1

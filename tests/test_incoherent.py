@@ -66,7 +66,7 @@ def _random_mixed(rng, pattern, *, complex_exit=True):
 
 @jax.jit
 def _batched(stacks, wl, ang):
-    return jax.vmap(lambda st, w, a: ls.specular(st, w, a))(stacks, wl, ang)
+    return jax.vmap(lambda st, w, a: ls.specular(st, w, angle_rad=a))(stacks, wl, ang)
 
 
 def _run(items):
@@ -171,7 +171,7 @@ def test_alpha_spectrum_and_slanted_path():
     h = 2e4
     st = ls.Stack(1.5, [ls.Layer(1.5, h, coherent=False, alpha=jnp.asarray(alpha))], ls.Substrate(1.5))
     ang = np.deg2rad([0.0, 30.0, 60.0, 85.0])
-    out = ls.specular(st, wl, jnp.asarray(ang))
+    out = ls.specular(st, wl, angle_rad=jnp.asarray(ang))
     expected = np.exp(-alpha[None, :] * h / np.cos(ang)[:, None])
     assert max_abs(out.T_front[:, 0], expected) <= 1e-15 * 10
     assert max_abs(out.T_front[:, 1], expected) <= 1e-15 * 10
@@ -186,7 +186,7 @@ def test_reciprocity_and_front_back_asymmetry_of_absorbing_films():
     c = ["i", "i", "c", "c", "i", "i"]
     st = build_stack(n, d, [x == "c" for x in c[1:-1]])
     ang = np.deg2rad([0.0, 25.0, 45.0])
-    out = ls.specular(st, jnp.array([450.0, 650.0]), jnp.asarray(ang))
+    out = ls.specular(st, jnp.array([450.0, 650.0]), angle_rad=jnp.asarray(ang))
     assert max_abs(out.T_front, out.T_back) <= 1e-14
     assert float(jnp.min(jnp.abs(out.R_front - out.R_back))) > 1e-2
     for ia, th in enumerate(ang):
@@ -200,7 +200,7 @@ def test_reciprocity_and_front_back_asymmetry_of_absorbing_films():
                 assert abs(float(out.T_back[ia, ip, iw]) - Tb) <= TOL_TMM
     # lossless films: R_front == R_back too (energy conservation + reciprocity)
     st = build_stack([1.0, 1.5, 2.1, 1.38, 1.5, 1.33], d, [x == "c" for x in c[1:-1]])
-    out = ls.specular(st, jnp.array([450.0, 650.0]), jnp.asarray(ang))
+    out = ls.specular(st, jnp.array([450.0, 650.0]), angle_rad=jnp.asarray(ang))
     assert max_abs(out.R_front, out.R_back) <= 1e-13
     assert max_abs(out.R_front + out.T_front, 1.0) <= 1e-13
 
@@ -217,7 +217,7 @@ def test_total_internal_reflection_inside_the_stack():
     n = [1.6, 1.7, 1.0, 1.5, 1.5]
     h = [2e4, 1e4, 3e4]
     alpha = [1e-5, 2e-5, 1e-5]
-    out = ls.specular(build_stack(n, [INF] + h + [INF], [False] * 3, alpha), wl, jnp.asarray(ang))
+    out = ls.specular(build_stack(n, [INF] + h + [INF], [False] * 3, alpha), wl, angle_rad=jnp.asarray(ang))
     for x in out:
         assert np.all(np.isfinite(np.asarray(x)))
     ah = [a * x for a, x in zip(alpha, h)]
@@ -231,7 +231,7 @@ def test_total_internal_reflection_inside_the_stack():
     n = [1.6, 1.7 + 1e-5j, 2.0 + 0.5j, 1.0, 1.5 + 1e-5j, 1.5]
     d = [INF, 2e4, 40.0, 3e4, 1e4, INF]
     c = ["i", "i", "c", "i", "i", "i"]
-    out = ls.specular(build_stack(n, d, [x == "c" for x in c[1:-1]]), wl, jnp.asarray(ang))
+    out = ls.specular(build_stack(n, d, [x == "c" for x in c[1:-1]]), wl, angle_rad=jnp.asarray(ang))
     for x in out:
         assert np.all(np.isfinite(np.asarray(x)))
     assert np.all(np.asarray(out.T_front[ang >= th_c]) == 0.0)
@@ -255,7 +255,7 @@ def test_frustrated_tir_through_a_thin_film_between_thick_layers():
     for kind, dd, cc in (("thin", 100.0, "c"), ("thick", 1e5, "i")):
         d = [INF, 1e4, dd, 1e4, INF]
         c = ["i", "i", cc, "i", "i"]
-        out = ls.specular(build_stack(n, d, [x == "c" for x in c[1:-1]]), jnp.array([500.0]), th)
+        out = ls.specular(build_stack(n, d, [x == "c" for x in c[1:-1]]), jnp.array([500.0]), angle_rad=th)
         for ip, pol in enumerate("sp"):
             R, T = ref.inc_stack_R_T(pol, n, d, c, th, 500.0)
             assert abs(float(out.R_front[ip, 0]) - R) <= TOL_TMM
@@ -271,7 +271,7 @@ def test_opaque_thick_layer_no_nan_and_limits():
     ):
         st = ls.Stack(1.0, [layer], ls.Substrate(1.5))
         ang = np.deg2rad([0.0, 45.0, 89.9])
-        out = ls.specular(st, jnp.array([500.0]), jnp.asarray(ang))
+        out = ls.specular(st, jnp.array([500.0]), angle_rad=jnp.asarray(ang))
         for x in out:
             assert np.all(np.isfinite(np.asarray(x)))
         assert np.all(np.asarray(out.T_front) == 0.0)

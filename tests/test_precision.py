@@ -58,8 +58,8 @@ def cases() -> dict:
     layers = [ls.Layer(n, h, coherent=False, alpha=a) for n, h, a in zip((1.5, 1.6, 1.45), (1e4, 2e4, 5e3), alpha)]
     p2 = ls.Stack(1.0, layers, ls.LambertianBackground(1.52, rho))
     return {
-        "coherent_10_layers": lambda: ls.specular(p1, wl, angles).R_front,
-        "coherent_10um_film": lambda: ls.specular(thick, wl, angles).R_front,
+        "coherent_10_layers": lambda: ls.specular(p1, wl, angle_rad=angles).R_front,
+        "coherent_10um_film": lambda: ls.specular(thick, wl, angle_rad=angles).R_front,
         "radiometric_sphere": lambda: ls.reflectance(p2, jnp.asarray(wl2), ls.Sphere(8.0)),
         "radiometric_45_0": lambda: ls.reflectance(p2, jnp.asarray(wl2), ls.Directional(45.0, 0.0)),
     }

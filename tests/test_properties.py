@@ -48,7 +48,7 @@ def _stack(pattern, n, d, alpha=None):
 
 @jax.jit
 def _spec(stack, wl, ang):
-    return ls.specular(stack, wl, ang)
+    return ls.specular(stack, wl, angle_rad=ang)
 
 
 def _check_lossless(out, back_mask):

@@ -108,7 +108,7 @@ def test_tabulated_out_of_range():
     assert "outside" in msg and "400" in msg and "700" in msg
     _raises("ink", ls.specular, st, jnp.array([500.0, 800.0]), 0.0)
     # inside the range: fine, and it interpolates linearly
-    out = ls.specular(st, jnp.array([400.0, 700.0]), 0.0)
+    out = ls.specular(st, jnp.array([400.0, 700.0]), angle_rad=0.0)
     assert out.R_front.shape == (2, 2)
     rho = ls.TabulatedSpectrum([400.0, 700.0], jnp.array([0.2, 0.3]), name="paint")
     bg = ls.Stack(1.0, [], ls.LambertianBackground(1.5, rho))
@@ -119,7 +119,7 @@ def test_tabulated_out_of_range_inside_jit_raises():
     """Traced wavelengths: the range check runs inside the compiled function (equinox error)."""
     mat = ls.Tabulated([400.0, 700.0], [1.5, 1.6], name="ink")
     st = ls.Stack(1.0, [ls.Layer(mat, 100.0)], ls.Substrate(1.5))
-    f = jax.jit(lambda wl: ls.specular(st, wl, 0.0).R_front)
+    f = jax.jit(lambda wl: ls.specular(st, wl, angle_rad=0.0).R_front)
     f(jnp.array([450.0, 650.0]))  # fine
     with pytest.raises(Exception, match="outside the data range"):
         jax.block_until_ready(f(jnp.array([300.0, 650.0])))

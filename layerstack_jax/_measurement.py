@@ -37,7 +37,7 @@ import numpy as np
 
 from ._validate import LayerstackError
 
-__all__ = ["Measurement", "QUANTITIES", "component_names"]
+__all__ = ["Measurement", "QUANTITIES", "component_names", "measurement_from_points"]
 
 #: The measured quantities a :class:`Measurement` can hold.
 QUANTITIES = ("psi_delta", "mueller", "reflectance", "transmittance")

@@ -13,15 +13,16 @@ Formats
   ``Angstroms``, ``eV``, ``um``), then rows ``wavelength angle psi delta [sigma_psi sigma_delta]``
   (WVASE) or the same prefixed by ``E`` (CompleteEASE); rows labelled ``dPolE`` (depolarization, %),
   ``uR`` … are kept in ``Measurement.extras``; rows ``mm12 wavelength angle value sigma`` (``mmij``,
-  i, j = 1..4) make a Mueller-matrix measurement normalised by M11. Time-resolved ("Dynamic") and
-  tan ψ / cos Δ ("TRIG") exports are refused.
+  i, j = 1..4) make a Mueller-matrix measurement normalised by M11 (this row layout follows
+  CompleteEASE's labelled-row convention; no real Mueller export was at hand to test it).
+  Time-resolved ("Dynamic") and tan ψ / cos Δ ("TRIG") exports are refused.
 * :func:`read_sentech` — Sentech SpectraRay ASCII exports: a first line
   ``; WAVELENGTH a1 a1 a2 a2 …`` (the angle of every column), then rows ``wavelength(nm)`` followed
   by ψ, Δ pairs per angle, or by the 16 elements M11 … M44 (row-major) of the normalised Mueller
   matrix per angle.
 * :func:`read_accurion` — Accurion EP3/EP4 nulling-ellipsometer exports (``#Lambda … AOI Delta
-  Psi`` header, a ``#nm … deg`` units line); the nulling zones of one point are averaged (as
-  refellips does) and their standard deviation is *not* reported as σ.
+  Psi`` header, a ``#nm … deg`` units line); the nulling zones 1–4 of one point are averaged
+  (as refellips does), no σ.
 * :func:`read_nexus` — NeXus/HDF5 files following the NXellipsometry application definition
   (both layouts found in the wild: ``entry/sample/measured_data`` with
   ``entry/instrument/spectrometer/wavelength``, and ``entry/data_collection/measured_data`` with

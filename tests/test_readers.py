@@ -500,6 +500,19 @@ def test_woollam_refusals(tmp_path):
         read_woollam(word)
 
 
+def test_sentech_decimal_comma_and_refusals(tmp_path):
+    p = _write(tmp_path, "de.txt", "; WAVELENGTH 70,0 70,0\n500,5 20,25 100,5\n600,0 21,0 101,0\n")
+    m = read_sentech(p)
+    np.testing.assert_array_equal(m.wavelength_nm, [500.5, 600.0])
+    np.testing.assert_array_equal(m.values[0, :, 0], [20.25, 100.5])
+    energy = _write(tmp_path, "ev.txt", "; ENERGY 70 70\n2.0 20 100\n")
+    with pytest.raises(LayerstackError, match=r"ev.txt, line 1: first column is 'ENERGY'; only wavelength \(nm\)"):
+        read_sentech(energy)
+    odd = _write(tmp_path, "odd.txt", "; WAVELENGTH 50 60 70\n500 20 100 30\n")
+    with pytest.raises(LayerstackError, match=r"odd.txt, line 1: psi/delta exports need the angles in pairs"):
+        read_sentech(odd)
+
+
 def test_woollam_mueller_rows(tmp_path):
     rows = []
     for wl in (400.0, 500.0):

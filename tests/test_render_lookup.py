@@ -48,7 +48,7 @@ def test_values_match_scipy_multilinear():
         wls = rng.uniform(t.wavelength_nm[0], t.wavelength_nm[-1], 4)
         phi_i = rng.uniform(-np.pi, np.pi)
         sign = rng.choice([-1.0, 1.0])
-        wi, wo = _direction(ci, phi_i), _direction(co, phi_i + sign * dphi)
+        wi, wo = _direction(ci, phi_i), _direction(co, phi_i + math.pi + sign * dphi)  # φ from the mirror side
         got_r = surf.specular(ci, wls)
         got_d = surf.brdf(wi, wo, wls)
         err_r = max(err_r, np.abs(np.array(got_r) - kr_ref(np.stack([np.full(4, ci), wls], -1))).max())
@@ -67,13 +67,14 @@ def test_clamped_outside_grids_and_below_horizon():
 
 
 def test_azimuth_convention():
+    """φ = 0 on the forward (specular) side, π back towards the source (_render_tables)."""
     wi = _direction(0.8, 0.3)
     mirror = (-wi[0], -wi[1], wi[2])
-    assert _azimuth(wi, mirror) == pytest.approx(math.pi)
-    assert _azimuth(wi, _direction(0.5, 0.3)) == pytest.approx(0.0, abs=1e-7)
-    assert _azimuth(wi, _direction(0.5, 0.3 + 1.0)) == pytest.approx(1.0)
-    assert _azimuth(wi, _direction(0.5, 0.3 - 1.0)) == pytest.approx(1.0)
-    assert _azimuth((0, 0, 1.0), _direction(0.5, 2.0)) == pytest.approx(math.pi)
+    assert _azimuth(wi, mirror) == pytest.approx(0.0, abs=1e-7)
+    assert _azimuth(wi, _direction(0.5, 0.3)) == pytest.approx(math.pi)
+    assert _azimuth(wi, _direction(0.5, 0.3 + math.pi + 1.0)) == pytest.approx(1.0)
+    assert _azimuth(wi, _direction(0.5, 0.3 + math.pi - 1.0)) == pytest.approx(1.0)
+    assert _azimuth((0, 0, 1.0), _direction(0.5, 2.0)) == 0.0
 
 
 def _hemisphere_integral(fn, n_mu=200, n_phi=400):

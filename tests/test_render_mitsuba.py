@@ -134,8 +134,9 @@ def _rough(theta_i, theta_o, az, wl):
 
 @pytest.fixture(scope="module")
 def rough_tables():
-    ti, to, az = np.meshgrid(np.degrees(np.arccos(COS)), np.degrees(np.arccos(COS)), AZ_DEG, indexing="ij")
-    k_d = LOBE * _rough(ti, to, az, WL)  # (A, B, P, L)
+    ti, to, phi = np.meshgrid(np.degrees(np.arccos(COS)), np.degrees(np.arccos(COS)), AZ_DEG, indexing="ij")
+    # the tables' φ is measured from the forward (specular) side: rough_brdf's azimuth is 180° − φ
+    k_d = LOBE * _rough(ti, to, 180.0 - phi, WL)  # (A, B, P, L)
     k_r = (1 - LOBE) * _R(np.degrees(np.arccos(COS)), WL)  # a delta lobe as well (never seen by a directional light)
     return CoatingTables(WL, COS, k_r, np.zeros_like(k_r), np.radians(AZ_DEG), COS, k_d)
 
@@ -153,7 +154,7 @@ def test_rough_plane_under_directional_light_reads_brdf_cos_irradiance(rough_tab
         "plane": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(50.0), "bsdf": bsdf},
         "sensor": _camera(theta_v, spp=64),
     })[0, 0]
-    # rough_brdf's azimuth, like the tables', is between the two outward directions (180°: mirror side)
+    # rough_brdf's azimuth is between the two outward directions (180°: mirror side)
     expected = LOBE * _band_average(lambda wl: _rough(theta_l, theta_v, az, wl)) * math.cos(math.radians(theta_l))
     assert np.abs(got - expected).max() < 3e-3 * expected.max() + 1e-5, (got, expected)
 

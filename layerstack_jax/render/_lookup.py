@@ -25,11 +25,12 @@ field                   shape         meaning
 ``k_d``                 (A, B, P, L)  diffuse BRDF, 1/sr
 ======================  ============  ==================================================
 
-**Azimuth convention.** With both directions pointing away from the surface (Mitsuba's
-``wi`` and ``wo``), :math:`\Delta\phi = |\phi_o - \phi_i|` folded into [0, π]: Δφ = π is the
-plane of specular reflection on the forward side (the mirror direction of ``wi`` has Δφ = π,
-as ``azimuth_deg = 180`` in :func:`layerstack_jax.rough_brdf`), Δφ = 0 is back towards the
-source. At normal incidence Δφ is undefined and taken as π.
+**Azimuth convention** (that of :mod:`layerstack_jax._render_tables`). φ is measured from the
+forward (specular) side of the plane of incidence and folded into [0, π]: φ = 0 is the mirror
+direction's azimuth, φ = π back towards the source. With Mitsuba's outward ``wi`` and ``wo``,
+φ is the angle between the surface projections of ``wo`` and of the mirror direction of ``wi``
+(:func:`layerstack_jax.rough_brdf`'s ``azimuth_deg`` is 180° − φ). At normal incidence φ is
+undefined and taken as 0.
 
 **Interpolation.** Linear in cos θ_i, cos θ_o, Δφ and λ (multilinear), clamped to the end
 values outside each grid (Mitsuba samples 360–830 nm; tables usually cover less).
@@ -122,13 +123,15 @@ def _bracket(grid: list, x: float):
 
 
 def _azimuth(wi, wo) -> float:
-    """Δφ in [0, π] between the projections of two outward directions ``(x, y, z)`` on the
-    surface; π at normal incidence or grazing exit (undefined azimuth)."""
+    """φ in [0, π] of the outward direction ``wo`` from the forward side of the plane of
+    incidence of the outward direction ``wi`` (both ``(x, y, z)``, local frame): the angle between
+    the surface projections of ``wo`` and of the mirror direction ``(-x, -y, z)`` of ``wi``; 0 when
+    either projection vanishes (azimuth undefined)."""
     si2 = wi[0] * wi[0] + wi[1] * wi[1]
     so2 = wo[0] * wo[0] + wo[1] * wo[1]
     if si2 <= 1e-24 or so2 <= 1e-24:
-        return math.pi
-    c = (wi[0] * wo[0] + wi[1] * wo[1]) / math.sqrt(si2 * so2)
+        return 0.0
+    c = -(wi[0] * wo[0] + wi[1] * wo[1]) / math.sqrt(si2 * so2)
     return math.acos(max(-1.0, min(1.0, c)))
 
 
@@ -353,6 +356,6 @@ class TableSurface:
         sign = 1.0 if y < 1.0 else -1.0
         y = y if y < 1.0 else y - 1.0
         dphi = lobe.phi_edges[p] + y * (lobe.phi_edges[p + 1] - lobe.phi_edges[p])
-        phi_o = math.atan2(wi[1], wi[0]) + sign * dphi
+        phi_o = math.atan2(-wi[1], -wi[0]) + sign * dphi  # from the mirror direction's azimuth
         s = math.sqrt(max(0.0, 1.0 - mu * mu))
         return (s * math.cos(phi_o), s * math.sin(phi_o), mu)

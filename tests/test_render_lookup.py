@@ -121,6 +121,13 @@ def test_specular_probability_and_flags():
     assert DEFENSIVE > 0
 
 
+def test_specular_only_tables():
+    t = _tables()
+    surf = TableSurface(t._replace(cos_theta_out=np.zeros(0), phi_out=np.zeros(0), k_d=np.zeros((t.k_r.shape[0], 0, 0, t.k_r.shape[1]))))
+    assert not surf.has_diffuse and surf.specular_probability(0.5) == 1.0
+    assert surf.brdf(_direction(0.5, 0), _direction(0.5, 1), [500.0]) == [0.0]
+
+
 def test_single_node_grids():
     t = _tables(A=1, B=1, P=1, L=1)
     surf = TableSurface(t)

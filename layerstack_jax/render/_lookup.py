@@ -222,12 +222,16 @@ class TableSurface:
             raise LayerstackError(f"tables lack the field(s) {missing} of CoatingTables")
         wl = _grid("wavelength_nm", tables.wavelength_nm, 1.0, np.inf)
         cos_t = _grid("cos_theta", tables.cos_theta, 0.0, 1.0)
-        cos_o = _grid("cos_theta_out", tables.cos_theta_out, 0.0, 1.0)
-        phi = _grid("phi_out", tables.phi_out, 0.0, np.pi)
-        A, L, B, P = cos_t.size, wl.size, cos_o.size, phi.size
+        A, L = cos_t.size, wl.size
         k_r = _values("k_r", tables.k_r, (A, L))
         k_t = _values("k_t", tables.k_t, (A, L))
-        k_d = _values("k_d", tables.k_d, (A, B, P, L))
+        if np.size(tables.k_d) == 0 and np.size(tables.cos_theta_out) * np.size(tables.phi_out) == 0:
+            # specular-only tables (k_d of shape (A, 0, 0, L)): no diffuse lobe
+            cos_o, phi, k_d = np.array([1.0]), np.array([0.0]), np.zeros((A, 1, 1, L))
+        else:
+            cos_o = _grid("cos_theta_out", tables.cos_theta_out, 0.0, 1.0)
+            phi = _grid("phi_out", tables.phi_out, 0.0, np.pi)
+            k_d = _values("k_d", tables.k_d, (A, cos_o.size, phi.size, L))
         if np.any(k_t > 0):
             warnings.warn("tables.k_t is non-zero: the rendered surface is opaque, its transmittance is not rendered", stacklevel=2)
         self.has_specular = bool(np.any(k_r > 0))

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import itertools
 import threading
+import time
 
 from .._validate import LayerstackError
 from ._lookup import TableSurface
@@ -91,7 +92,11 @@ def _make_class(mi):
             key = props["surface_id"]
             if key not in _SURFACES:
                 raise LayerstackError(f"{PLUGIN_NAME}: unknown surface_id {key!r} (make the BSDF with coated_bsdf(tables))")
-            self.surface: TableSurface = _SURFACES[key]
+            self.surface: TableSurface = _SURFACES[key][0]
+            self.timings = _SURFACES[key][1]
+            if self.timings is not None:  # profiling: time every call of the BSDF interface
+                for name in ("sample", "eval", "pdf", "eval_pdf"):
+                    setattr(self, name, _timed(getattr(self, name), name, self.timings))
             self.surface_id = key
             self.m_components = [delta, glossy]
             flags = 0
@@ -185,6 +190,22 @@ def _make_class(mi):
     return CoatedBSDF
 
 
+def _timed(method, name: str, timings: dict):
+    """``method`` that adds its wall time (s) and call count to ``timings[name]`` = [s, calls]."""
+    clock = time.perf_counter
+    entry = timings.setdefault(name, [0.0, 0])
+
+    def timed(*args):
+        t0 = clock()
+        try:
+            return method(*args)
+        finally:
+            entry[0] += clock() - t0
+            entry[1] += 1
+
+    return timed
+
+
 def register(variant: str | None = None) -> str:
     """Register the coated BSDF with Mitsuba under :data:`PLUGIN_NAME` for the current variant.
 
@@ -209,13 +230,15 @@ def register(variant: str | None = None) -> str:
     return PLUGIN_NAME
 
 
-def coated_bsdf(tables, *, variant: str | None = None):
+def coated_bsdf(tables, *, variant: str | None = None, timings: dict | None = None):
     """A Mitsuba BSDF object for a coated surface described by ``tables``.
 
     Args:
         tables: a ``CoatingTables`` (fields and units in :mod:`layerstack_jax.render._lookup`);
             validated (:class:`~layerstack_jax.LayerstackError` naming the field).
         variant: optional Mitsuba variant to set first (see :func:`register`).
+        timings: a dict to profile the plugin: each call of ``sample``, ``eval``, ``pdf``,
+            ``eval_pdf`` adds its wall time to ``timings[name] = [seconds, calls]``.
 
     Returns:
         A ``mi.BSDF`` to put in a scene dictionary (``"bsdf": coated_bsdf(tables)``).
@@ -224,5 +247,5 @@ def coated_bsdf(tables, *, variant: str | None = None):
     name = register(variant)
     mi, _ = import_mitsuba()
     key = f"coating-{next(_IDS)}"
-    _SURFACES[key] = surface
+    _SURFACES[key] = (surface, timings)
     return mi.load_dict({"type": name, "surface_id": key})

@@ -1,0 +1,459 @@
+r"""Fitting a hyperspectral cube pixel by pixel, out of core, resumable, locally or on Dask.
+
+:func:`fit_cube` fits every pixel spectrum of a cube ``(y, x, wavelength)`` (read lazily:
+:func:`layerstack_jax._cubes.open_cube`) with the same :class:`~fitting.Objective` — one
+dataset, one sample; only the data differ, as in :func:`~fitting.fit_batch`, which does the
+fitting — and writes maps into a zarr store, region by region:
+
+* the cube is cut into regions of ``chunk`` = (rows, columns) pixels, all bands; a region is
+  read, its valid pixels are fitted by :func:`~fitting.fit_batch` (padded to a multiple of its
+  ``chunk_size`` so that one compiled solver serves every region), and its maps are written to
+  the store's chunk of the same size (``to_zarr(region=...)``: regions never share a chunk, so
+  workers write in parallel without locks). Memory is bounded by one region and one solver
+  chunk per worker, whatever the cube size.
+* once a region is written, a *completion marker* ``<out>.regions/<iy>_<ix>`` is
+  created (beside the store, which stays a plain zarr hierarchy) (atomically: written under a temporary name, then renamed). A restarted run
+  (``resume=True``) skips the regions whose marker exists and redoes the others, whose chunks
+  it overwrites completely: no pixel is lost or fitted twice, and the maps are bit-identical
+  to those of an uninterrupted run (each pixel's fit depends on its spectrum only; the same
+  compiled solver runs on the same padded shapes).
+* pixels are fitted only where the spectrum is usable: inside the user ``mask``, finite at every
+  band the dataset uses, below ``saturation`` and not negative. The others get NaN values and a
+  ``status`` code saying why (:data:`STATUS`).
+* maps: one per free parameter component (its name in :attr:`fitting.BatchResult.names`,
+  made safe for zarr), its standard error (``<name>_stderr``), ``chi2``, ``reduced_chi2``,
+  ``num_steps``, ``converged``, ``result_code``, ``rank`` of the normalised Jacobian and
+  ``identifiable`` (rank = number of free parameters: the pixel's *identifiability verdict*;
+  where it is 0, the stderr of the parameters involved are NaN) and ``status``.
+* before any pixel is fitted, the objective is checked for a degeneracy *by construction*: the
+  thickness and α of the same incoherent layer both free (Beer: only α·h enters, Simonot
+  eq. 20) — refused unless ``allow_degenerate=True`` (then warned once) — and the rank of the
+  Jacobian at the starting point (a warning, once, if it is deficient).
+* ``client``: None runs the regions one after the other in this process (XLA uses every core
+  for each solve); ``"processes"`` starts a :class:`distributed.LocalCluster` of ``n_workers``
+  single-threaded worker processes and closes it at the end; a :class:`distributed.Client` or a
+  scheduler address runs the same regions on that cluster. The objective is scattered once to
+  every worker, so each worker compiles the solver once and reuses it for all its regions; a
+  worker reads its region from the cube itself (a file-backed cube is never shipped whole).
+  Workers run in the client's precision (``jax_enable_x64`` is set to the caller's value in
+  the worker processes that run a region).
+* progress: pixels done, rate and ETA on a tqdm bar and in the ``fitting.cube`` logger.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import os
+import re
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Callable, Optional, Union
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from layerstack_jax import LayerstackError
+from layerstack_jax._cubes import open_cube
+
+from ._batch import fit_batch
+from ._objective import Objective
+from ._results import linearised_covariance
+
+__all__ = ["fit_cube", "STATUS", "degeneracy", "cube_regions"]
+
+log = logging.getLogger("fitting.cube")
+
+#: ``status`` codes of the maps.
+STATUS = {
+    -1: "not fitted yet",
+    0: "fitted",
+    1: "outside the mask",
+    2: "no data (NaN or infinite values)",
+    3: "saturated",
+    4: "negative values",
+}
+
+_MARKERS = ".regions"  # suffix of the marker directory beside the store
+_SAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
+
+
+def _var(name: str) -> str:
+    """A zarr-safe variable name for a parameter component (``varnish.alpha[3]`` → ``varnish.alpha_3``)."""
+    return _SAFE.sub("_", name).strip("_") or "parameter"
+
+
+def degeneracy(objective: Objective, *, rank_rtol: float = 1e-8) -> tuple:
+    """Degeneracies of ``objective`` known before fitting: ``(structural, rank_at_start)``.
+
+    ``structural``: messages for incoherent layers whose thickness and α are both free (only
+    α·h enters Beer's law, Simonot eq. 20: no data can separate them). ``rank_at_start``: the
+    rank of the normalised Jacobian of the residuals at the starting values
+    (:func:`fitting._results.linearised_covariance`), to compare with the number of free
+    parameters."""
+    free = {p.path for p in objective.layout.params if not np.all(p.fixed)}
+    structural = []
+    for i, layer in enumerate(objective.stack.layers):
+        if not layer.coherent and ("layers", i, "thickness") in free and ("layers", i, "alpha") in free:
+            label = layer.name or f"layers[{i}]"
+            structural.append(
+                f"{label}: thickness and alpha are both free, but an incoherent layer's spectra depend on them only "
+                "through alpha·h (Beer's law): fix one of them (e.g. a known thickness)")
+    layout = objective.layout
+    x0 = jnp.asarray(layout.x0)
+    args = objective.args()
+    J = jax.jacfwd(lambda x: objective.residuals(x, args, objective.optics))(x0)
+    J = np.asarray(J) * layout.scale[None, :]
+    _, _, rank, _, _ = linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)
+    return structural, int(rank)
+
+
+def cube_regions(shape: tuple, chunk: tuple) -> list:
+    """Regions ``(iy, ix, ys, xs)`` of a ``(ny, nx)`` image cut in ``chunk`` = (rows, cols) tiles."""
+    ny, nx = shape
+    ty, tx = chunk
+    return [(iy, ix, slice(iy * ty, min((iy + 1) * ty, ny)), slice(ix * tx, min((ix + 1) * tx, nx)))
+            for iy in range(-(-ny // ty)) for ix in range(-(-nx // tx))]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Settings:
+    """What every region task needs besides the objective and its pixels."""
+
+    out: str
+    names: tuple
+    method: str
+    chunk_size: int
+    saturation: Optional[float]
+    used_bands: Optional[np.ndarray]
+    fit_options: tuple
+    x64: bool
+
+
+def _pixel_status(block: np.ndarray, user_mask: Optional[np.ndarray], s: _Settings) -> np.ndarray:
+    """``status`` code of every pixel of a region block ``(ry, rx, wl)`` (:data:`STATUS`)."""
+    used = block if s.used_bands is None else block[..., s.used_bands]
+    status = np.zeros(block.shape[:2], np.int8)
+    status[np.any(used < 0, axis=-1)] = 4
+    if s.saturation is not None:
+        status[np.any(used >= s.saturation, axis=-1)] = 3
+    status[~np.all(np.isfinite(used), axis=-1)] = 2
+    if user_mask is not None:
+        status[~user_mask] = 1
+    return status
+
+
+def _empty_maps(shape: tuple, names: tuple) -> dict:
+    maps = {}
+    for n in names:
+        maps[_var(n)] = np.full(shape, np.nan)
+        maps[_var(n) + "_stderr"] = np.full(shape, np.nan)
+    for n in ("chi2", "reduced_chi2"):
+        maps[n] = np.full(shape, np.nan)
+    for n, dt in (("num_steps", np.int32), ("result_code", np.int16), ("rank", np.int16), ("converged", np.int8),
+                  ("identifiable", np.int8)):
+        maps[n] = np.full(shape, -1, dt)
+    maps["status"] = np.full(shape, -1, np.int8)
+    return maps
+
+
+def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: slice, xs: slice, s: _Settings):
+    """Fit one region and write it, then its completion marker. Runs in this process or on a
+    Dask worker. Returns ``{"region", "pixels", "fitted", "seconds"}``."""
+    t0 = time.perf_counter()
+    if bool(jax.config.jax_enable_x64) != s.x64:  # a fresh worker process: the caller's precision
+        jax.config.update("jax_enable_x64", s.x64)
+    data = np.asarray(getattr(block, "values", block), dtype=np.float64)
+    mask = None if user_mask is None else np.asarray(getattr(user_mask, "values", user_mask), dtype=bool)
+    status = _pixel_status(data, mask, s)
+    maps = _empty_maps(status.shape, s.names)
+    maps["status"] = status
+    valid = np.nonzero(status.ravel() == 0)[0]
+    if valid.size:
+        spectra = data.reshape(-1, data.shape[-1])[valid]
+        pad = -valid.size % s.chunk_size  # same padded shape in every region: one compiled solver
+        if pad:
+            spectra = np.concatenate([spectra, np.broadcast_to(spectra[:1], (pad, spectra.shape[1]))])
+        r = fit_batch(objective, spectra, s.method, chunk_size=s.chunk_size, progress=False, **dict(s.fit_options))
+        n_free = r.x.shape[1]
+
+        def put(name, values):
+            flat = maps[name].reshape(-1)
+            flat[valid] = values[:valid.size]
+
+        for j, n in enumerate(s.names):
+            put(_var(n), r.x[:, j])
+            put(_var(n) + "_stderr", r.stderr[:, j])
+        put("chi2", r.chi2)
+        put("reduced_chi2", r.reduced_chi2)
+        put("num_steps", r.num_steps)
+        put("result_code", r.result_code)
+        put("rank", r.rank)
+        put("converged", r.converged.astype(np.int8))
+        put("identifiable", (r.rank == n_free).astype(np.int8))
+    _write_region(s.out, maps, ys, xs)
+    _mark_done(s.out, iy, ix)
+    return {"region": (iy, ix), "pixels": int(status.size), "fitted": int(valid.size),
+            "seconds": time.perf_counter() - t0}
+
+
+def _write_region(out: str, maps: dict, ys: slice, xs: slice) -> None:
+    import xarray as xr
+
+    ds = xr.Dataset({k: (("y", "x"), v) for k, v in maps.items()})
+    ds.to_zarr(out, region={"y": ys, "x": xs}, consolidated=False)
+
+
+def _marker_dir(out: str) -> Path:
+    return Path(str(out).rstrip("/") + _MARKERS)
+
+
+def _marker(out: str, iy: int, ix: int) -> Path:
+    return _marker_dir(out) / f"{iy}_{ix}"
+
+
+def _mark_done(out: str, iy: int, ix: int) -> None:
+    path = _marker(out, iy, ix)
+    path.parent.mkdir(exist_ok=True)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+    tmp.write_text("done\n")
+    os.replace(tmp, path)  # atomic: a marker exists only once its region is fully written
+
+
+def _fingerprint(objective: Objective, cube, chunk: tuple, method: str, chunk_size: int, saturation, mask,
+                 fit_options: tuple) -> str:
+    """Identity of a job (objective, cube geometry, settings): a store is resumed only by the same job."""
+    h = hashlib.sha1()
+    lay = objective.layout
+    for part in (lay.names, np.asarray(lay.x0), np.asarray(lay.lower), np.asarray(lay.upper),
+                 np.asarray(objective.wavelength), np.asarray(cube["wavelength"].values), cube.shape, chunk, method,
+                 chunk_size, saturation, fit_options,
+                 [np.asarray(w) for w in objective.args()[1]]):
+        h.update(repr(part).encode() if not isinstance(part, np.ndarray) else part.tobytes())
+    if mask is not None:
+        h.update(np.packbits(np.asarray(mask, bool)).tobytes())
+    return h.hexdigest()
+
+
+def _init_store(out: str, cube, names: tuple, chunk: tuple, attrs: dict) -> None:
+    """Create the zarr store: every map at its 'not fitted yet' value, chunked like the regions."""
+    import dask.array as da
+    import xarray as xr
+
+    ny, nx = cube.sizes["y"], cube.sizes["x"]
+    template = _empty_maps((1, 1), names)
+    ds = xr.Dataset(
+        {k: (("y", "x"), da.full((ny, nx), v.reshape(-1)[0], dtype=v.dtype, chunks=chunk)) for k, v in template.items()},
+        coords={"y": cube["y"].values, "x": cube["x"].values},
+        attrs=attrs,
+    )
+    encoding = {k: {"chunks": chunk} for k in template}
+    markers = _marker_dir(out)
+    if markers.exists():  # markers of an earlier job in this place: they no longer describe the store
+        for m in markers.iterdir():
+            m.unlink()
+    ds.to_zarr(out, mode="w", encoding=encoding, consolidated=False)
+    markers.mkdir(exist_ok=True)
+
+
+def _check_objective(objective: Objective, cube) -> Optional[np.ndarray]:
+    """The objective must be a one-dataset, one-sample spectral fit on the cube's bands.
+    Returns the boolean band mask the dataset uses (None: all)."""
+    if not isinstance(objective, Objective):
+        raise LayerstackError(f"fit_cube: objective must be a fitting.Objective, got {type(objective).__name__}")
+    if len(objective.datasets) != 1 or objective.n_samples != 1:
+        raise LayerstackError("fit_cube: the objective must have one dataset of one sample (one spectrum per pixel)")
+    ds = objective.datasets[0]
+    if ds.colour is not None or ds.bare:
+        raise LayerstackError("fit_cube: the dataset must compare spectra (no colour, not bare)")
+    grid = np.asarray(objective.wavelength if ds.wavelength_nm is None else ds.wavelength_nm, dtype=float)
+    wl = np.asarray(cube["wavelength"].values, dtype=float)
+    if wl.shape != grid.shape or not np.allclose(wl, grid, rtol=0, atol=1e-6):
+        raise LayerstackError(
+            f"fit_cube: the cube's {wl.size} bands ({wl.min():g}–{wl.max():g} nm) are not the wavelengths of the "
+            f"objective's dataset ({grid.size}, {grid.min():g}–{grid.max():g} nm): build the Dataset on the cube's "
+            "wavelengths (wavelength_nm=cube.wavelength) or resample the cube")
+    if ds.mask is None:
+        return None
+    m = np.asarray(ds.mask, bool)
+    if m.ndim == 2:
+        m = m[0]
+    return m if m.ndim == 1 and m.size == wl.size else None
+
+
+def _reporter(progress, total: int, initial: int):
+    if not progress:
+        return None
+    if callable(progress):
+        return progress
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover - tqdm is in the 'cube' extra
+        return lambda done, tot: print(f"\rfit_cube: {done}/{tot} pixels", end="\n" if done >= tot else "",
+                                       file=sys.stderr, flush=True)
+    bar = tqdm(total=total, initial=initial, unit="px", desc="fit_cube", smoothing=0.05)
+
+    def update(done, tot):
+        bar.update(done - bar.n)
+        if done >= tot:
+            bar.close()
+
+    return update
+
+
+def _client(client, n_workers: int):
+    """``(client, owned)`` for ``client`` = None / 'processes' / Client / address."""
+    if client is None:
+        return None, None
+    from distributed import Client, LocalCluster
+
+    if isinstance(client, Client):
+        return client, None
+    if client == "processes":
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        c = Client(cluster)
+        return c, (c, cluster)
+    if isinstance(client, str):
+        c = Client(client)
+        return c, (c, None)
+    raise LayerstackError(f"fit_cube: client must be None, 'processes', a distributed.Client or an address, got {client!r}")
+
+
+def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=None, chunk=(64, 64),
+             saturation: Optional[float] = None, method: str = "lm", chunk_size: int = 128, client=None,
+             n_workers: int = 2, resume: bool = True, progress: Union[bool, Callable[[int, int], None]] = True,
+             allow_degenerate: bool = False, wavelength_nm=None, variable: Optional[str] = None, **fit_options):
+    """Fit every pixel of ``cube`` with ``objective`` and write the maps to the zarr store ``out``
+    (module docstring).
+
+    Args:
+        objective: a :class:`~fitting.Objective` with one dataset of one sample on the cube's
+            wavelengths; its data are a placeholder (only σ/weights and band mask are used).
+        cube: a cube from :mod:`layerstack_jax._cubes` (or anything :func:`open_cube` opens: a
+            path, an array ``(y, x, band)`` with ``wavelength_nm``, a DataArray).
+        out: path of the zarr store written (created, or resumed).
+        mask: optional boolean ``(y, x)``, True where pixels are to be fitted.
+        chunk: region size (rows, columns) in pixels: the unit of work, of writing and of resuming.
+        saturation: values >= this at a used band mark a pixel saturated (not fitted).
+        method, chunk_size, fit_options: passed to :func:`~fitting.fit_batch` (``chunk_size``
+            fits per compiled call; options e.g. ``max_steps``, ``rtol``, ``scale_covariance``).
+        client: None (this process), ``"processes"`` (a LocalCluster of ``n_workers``), a
+            :class:`distributed.Client` or a scheduler address.
+        resume: skip the regions already written by a previous run of the same job (a store of
+            another job is an error); False starts afresh (the store is overwritten).
+        progress: True for a progress bar, or a callable ``f(pixels_done, pixels_total)``.
+        allow_degenerate: fit even an objective degenerate by construction (warned once).
+
+    Returns:
+        :class:`xarray.Dataset` (lazy, opened from ``out``): maps ``(y, x)`` of every free
+        parameter component (its own unit: nm, 1/nm, dimensionless) and ``<name>_stderr``,
+        ``chi2``, ``reduced_chi2``, ``num_steps``, ``converged``, ``result_code``, ``rank``,
+        ``identifiable``, ``status`` (:data:`STATUS`); attributes name the parameters.
+    """
+    import xarray as xr
+
+    t_start = time.perf_counter()
+    cube = open_cube(cube, wavelength_nm, variable=variable)
+    used_bands = _check_objective(objective, cube)
+    ny, nx = cube.sizes["y"], cube.sizes["x"]
+    chunk = tuple(int(c) for c in chunk)
+    if len(chunk) != 2 or min(chunk) < 1:
+        raise LayerstackError(f"fit_cube: chunk must be (rows, columns) >= 1, got {chunk!r}")
+    if not (isinstance(chunk_size, int) and chunk_size >= 1):
+        raise LayerstackError(f"fit_cube: chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if mask is not None:
+        mask = np.asarray(getattr(mask, "values", mask))
+        if mask.dtype != bool or mask.shape != (ny, nx):
+            raise LayerstackError(f"fit_cube: mask must be boolean shaped {(ny, nx)} (True = fit), got "
+                                  f"{mask.dtype} {mask.shape}")
+    # degeneracies: before any pixel is fitted
+    structural, rank0 = degeneracy(objective)
+    if structural:
+        text = "fit_cube: the objective is degenerate by construction: " + "; ".join(structural)
+        if not allow_degenerate:
+            raise LayerstackError(text + " (allow_degenerate=True fits anyway; every pixel is then non-identifiable)")
+        warnings.warn(text, stacklevel=2)
+    elif rank0 < objective.n_parameters:
+        warnings.warn(f"fit_cube: the Jacobian at the starting values has rank {rank0} < {objective.n_parameters} free "
+                      "parameters: some combination is not determined there (see each pixel's 'identifiable' map)",
+                      stacklevel=2)
+    fit_opts = tuple(sorted(fit_options.items()))
+    names = tuple(objective.layout.names)
+    if len({_var(n) for n in names}) != len(names):
+        raise LayerstackError(f"fit_cube: parameter names {names} collide once made zarr-safe: name the parameters")
+    out = str(out)
+    fp = _fingerprint(objective, cube, chunk, method, chunk_size, saturation, mask, fit_opts)
+    attrs = {"fit_cube_job": fp, "parameters": json.dumps(list(names)),
+             "parameter_variables": json.dumps([_var(n) for n in names]), "method": method,
+             "status_codes": json.dumps({str(k): v for k, v in STATUS.items()}), "chunk": json.dumps(list(chunk)),
+             "source": str(cube.attrs.get("source", "array"))}
+    existing = Path(out).exists()
+    if existing and resume:
+        try:
+            old = xr.open_zarr(out, consolidated=False).attrs.get("fit_cube_job")
+        except Exception:
+            old = None
+        if old != fp:
+            raise LayerstackError(f"fit_cube: {out} holds the maps of another job (objective, cube or settings "
+                                  "differ): choose another store, or resume=False to overwrite it")
+    else:
+        _init_store(out, cube, names, chunk, attrs)
+    regions = cube_regions((ny, nx), chunk)
+    pending = [r for r in regions if not _marker(out, r[0], r[1]).exists()]
+    done_px = sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in regions) - \
+        sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in pending)
+    total = ny * nx
+    if len(pending) < len(regions):
+        log.info("fit_cube: resuming %s: %d of %d regions already written", out, len(regions) - len(pending), len(regions))
+    settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
+                         bool(jax.config.jax_enable_x64))
+    report = _reporter(progress, total, done_px)
+    t0 = time.perf_counter()
+    done0 = done_px
+
+    def finished(summary):
+        nonlocal done_px
+        done_px += summary["pixels"]
+        rate = (done_px - done0) / max(time.perf_counter() - t0, 1e-9)
+        eta = (total - done_px) / rate if rate > 0 else float("inf")
+        log.info("fit_cube: region %s: %d pixels (%d fitted) in %.3g s; %d/%d pixels, %.4g px/s, ETA %.0f s",
+                 summary["region"], summary["pixels"], summary["fitted"], summary["seconds"], done_px, total, rate, eta)
+        if report is not None:
+            report(done_px, total)
+
+    def block_of(ys, xs):
+        return cube.isel(y=ys, x=xs), None if mask is None else mask[ys, xs]
+
+    c, owned = _client(client, n_workers)
+    try:
+        if c is None:
+            for iy, ix, ys, xs in pending:
+                blk, m = block_of(ys, xs)
+                finished(_fit_region(objective, blk.values, m, iy, ix, ys, xs, settings))
+        elif pending:
+            from distributed import as_completed
+
+            obj = c.scatter(objective, broadcast=True, hash=False)
+            futures = []
+            for iy, ix, ys, xs in pending:
+                blk, m = block_of(ys, xs)
+                futures.append(c.submit(_fit_region, obj, blk, m, iy, ix, ys, xs, settings, pure=False,
+                                        key=f"fit_cube-{fp[:12]}-{iy}-{ix}"))
+            for f in as_completed(futures):
+                finished(f.result())
+    finally:
+        if owned is not None:
+            client_, cluster = owned
+            client_.close()
+            if cluster is not None:
+                cluster.close()
+    if report is not None and not pending:
+        report(total, total)
+    log.info("fit_cube: %s complete (%d pixels) in %.3g s", out, total, time.perf_counter() - t_start)
+    return xr.open_zarr(out, consolidated=False)

@@ -1,0 +1,208 @@
+"""Hyperspectral cubes: lazy readers (ENVI written by ``spectral``, zarr, NetCDF/HDF5, npy) and
+:func:`fitting._cube.fit_cube` — equal to :func:`fitting.fit_batch` on the same pixels, masked and
+no-data pixels marked and never fitted, a run killed mid-way (SIGKILL of the process) and resumed
+giving identical maps, degenerate objectives refused before any compute, and the same job on a
+``distributed.LocalCluster`` of 2 worker processes giving identical maps."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("xarray")
+pytest.importorskip("zarr")
+pytest.importorskip("dask")
+
+import fitting  # noqa: E402
+import layerstack_jax as ls  # noqa: E402
+from fitting._cube import STATUS, fit_cube  # noqa: E402
+from layerstack_jax._batched import predict  # noqa: E402
+from layerstack_jax._cubes import as_cube, open_cube, read_envi, read_npy, read_zarr, write_zarr_cube  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# ----------------------------------------------------------------------------- readers
+
+
+def _random_cube(ny=5, nx=7, nb=4, dtype=np.float32):
+    return np.random.default_rng(0).random((ny, nx, nb)).astype(dtype)
+
+
+@pytest.mark.parametrize("interleave", ["bsq", "bil", "bip"])
+def test_envi_written_by_spectral_round_trips(tmp_path, interleave):
+    envi = pytest.importorskip("spectral.io.envi")
+    a = _random_cube()
+    hdr = tmp_path / "cube.hdr"
+    envi.save_image(str(hdr), a, interleave=interleave,
+                    metadata={"wavelength": [0.4, 0.5, 0.6, 0.7], "wavelength units": "Micrometers"})
+    cube = read_envi(hdr)
+    assert cube.dims == ("y", "x", "wavelength")
+    assert cube.chunks is not None  # dask-backed: lazy
+    np.testing.assert_allclose(cube["wavelength"].values, [400.0, 500.0, 600.0, 700.0], rtol=1e-12)
+    np.testing.assert_array_equal(cube.values, a)
+    np.testing.assert_array_equal(open_cube(hdr).isel(y=slice(1, 3), x=slice(2, 5)).values, a[1:3, 2:5])
+
+
+def test_zarr_npy_netcdf_round_trip(tmp_path):
+    a = _random_cube(dtype=np.float64)
+    wl = [400.0, 500.0, 600.0, 700.0]
+    write_zarr_cube(a, tmp_path / "c.zarr", wl, chunks=(2, 3, -1))
+    z = read_zarr(tmp_path / "c.zarr")
+    assert z.chunks[0] == (2, 2, 1) and z.chunks[1] == (3, 3, 1)  # the store's chunks, read lazily
+    np.testing.assert_array_equal(z.values, a)
+    np.testing.assert_array_equal(z["wavelength"].values, wl)
+    np.save(tmp_path / "c.npy", a)
+    np.testing.assert_array_equal(read_npy(tmp_path / "c.npy", wl).values, a)
+    pytest.importorskip("h5netcdf")
+    z.to_dataset(name="r").to_netcdf(tmp_path / "c.h5", engine="h5netcdf")
+    np.testing.assert_array_equal(open_cube(tmp_path / "c.h5").values, a)
+
+
+def test_reader_errors_name_the_problem(tmp_path):
+    with pytest.raises(ls.LayerstackError, match="3 wavelengths for 4 bands"):
+        as_cube(_random_cube(), [400.0, 500.0, 600.0])
+    with pytest.raises(ls.LayerstackError, match="strictly increasing"):
+        as_cube(_random_cube(), [400.0, 500.0, 500.0, 600.0])
+    with pytest.raises(ls.LayerstackError, match="unknown format"):
+        open_cube(tmp_path / "c.txt")
+
+
+# ----------------------------------------------------------------------------- fit_cube
+
+WL = np.linspace(420.0, 700.0, 15)
+GEOMETRY = ls.Specular(8.0, "R")
+NY, NX = 6, 5
+
+
+def _stack(d=150.0, n=2.0):
+    return ls.Stack(1.0, [ls.Layer(ls.Index(n), d, coherent=True, name="film")], ls.Substrate(1.52))
+
+
+def _synthetic():
+    """A cube made by the forward model (film thickness and index per pixel) with noise, one
+    NaN band, one saturated pixel and one negative value; and a user mask."""
+    rng = np.random.default_rng(3)
+    d = rng.uniform(100.0, 200.0, (NY, NX))
+    n = rng.uniform(1.9, 2.2, (NY, NX))
+    cube = predict(_stack(d[..., None], n[..., None]), WL, GEOMETRY) + rng.normal(0.0, 1e-3, (NY, NX, WL.size))
+    cube[1, 2, 5] = np.nan
+    cube[3, 0, 7] = 5.0  # saturated
+    cube[5, 1, 2] = -0.5  # negative
+    mask = np.ones((NY, NX), bool)
+    mask[4, 4] = False
+    return cube, mask, d, n
+
+
+CUBE, MASK, D_TRUE, N_TRUE = _synthetic()
+
+
+def _objective(degenerate=False):
+    params = [fitting.thickness("film", value=150.0, lower=60.0, upper=260.0),
+              fitting.index_n("film", value=2.05, lower=1.6, upper=2.6)]
+    return fitting.Objective(_stack(), WL, fitting.Dataset(GEOMETRY, CUBE[0, 0], sigma=1e-3), params)
+
+
+OPTIONS = dict(mask=MASK, saturation=1.0, chunk=(4, 3), chunk_size=8, progress=False)
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cube")
+    write_zarr_cube(CUBE, d / "cube.zarr", WL, chunks=(4, 3, -1))
+    maps = fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=d / "maps.zarr", **OPTIONS).load()
+    return d, maps
+
+
+def test_fit_cube_equals_fit_batch_and_marks_unusable_pixels(local_run):
+    _, maps = local_run
+    status = maps["status"].values
+    expected = np.zeros((NY, NX), np.int8)
+    expected[1, 2], expected[3, 0], expected[5, 1], expected[4, 4] = 2, 3, 4, 1
+    np.testing.assert_array_equal(status, expected)
+    assert set(np.unique(status)) <= set(STATUS)
+    ok = status == 0
+    assert np.all(np.isnan(maps["thickness_film"].values[~ok])) and np.all(maps["num_steps"].values[~ok] == -1)
+    b = fitting.fit_batch(_objective(), CUBE[ok], chunk_size=8)
+    np.testing.assert_allclose(maps["thickness_film"].values[ok], b.x[:, 0], rtol=1e-10)
+    np.testing.assert_allclose(maps["n_film"].values[ok], b.x[:, 1], rtol=1e-10)
+    np.testing.assert_allclose(maps["thickness_film_stderr"].values[ok], b.stderr[:, 0], rtol=1e-6)
+    np.testing.assert_allclose(maps["chi2"].values[ok], b.chi2, rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(maps["num_steps"].values[ok], b.num_steps)
+    np.testing.assert_array_equal(maps["converged"].values[ok], b.converged.astype(np.int8))
+    np.testing.assert_array_equal(maps["identifiable"].values[ok], (b.rank == 2).astype(np.int8))
+    # and the fits found the truth the cube was made from (σ = 1e-3 noise)
+    assert np.all(maps["converged"].values[ok] == 1)
+    assert np.max(np.abs(maps["thickness_film"].values[ok] - D_TRUE[ok])) < 3.0
+
+
+def test_resume_of_another_job_is_refused(local_run, tmp_path):
+    d, _ = local_run
+    with pytest.raises(ls.LayerstackError, match="another job"):
+        fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=d / "maps.zarr", **dict(OPTIONS, saturation=0.9))
+
+
+def test_wavelength_mismatch_and_degenerate_objective_refused_before_compute(tmp_path):
+    with pytest.raises(ls.LayerstackError, match="bands"):
+        fit_cube(_objective(), CUBE[..., :-1], wavelength_nm=WL[:-1], out=tmp_path / "a.zarr")
+    varnish = ls.Stack(1.0, [ls.Layer(1.5, 2e4, coherent=False, alpha=2e-5, name="varnish")],
+                       ls.LambertianBackground(1.52, 0.5))
+    wl = WL[:4]
+    obj = fitting.Objective(varnish, wl, fitting.Dataset(ls.Directional(45.0, 0.0), np.full(4, 0.3)),
+                            [fitting.thickness("varnish", value=2e4), fitting.alpha("varnish", value=2e-5)])
+    with pytest.raises(ls.LayerstackError, match=r"varnish: thickness and alpha are both free.*alpha·h"):
+        fit_cube(obj, np.full((2, 2, 4), 0.3), wavelength_nm=wl, out=tmp_path / "b.zarr")
+    assert not (tmp_path / "b.zarr").exists()  # refused before anything was written or fitted
+
+
+_CHILD = textwrap.dedent("""
+    import sys, time
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    sys.path.insert(0, {tests!r})
+    import test_cube as t
+    from fitting._cube import fit_cube
+    from layerstack_jax._cubes import read_zarr
+
+    def slow(done, total):  # a slow worker, so that the parent kills it mid-way
+        time.sleep(0.7)
+
+    fit_cube(t._objective(), read_zarr({cube!r}), out={out!r}, **dict(t.OPTIONS, progress=slow))
+""")
+
+
+def test_killed_run_resumes_to_identical_maps(local_run, tmp_path):
+    d, maps = local_run
+    out = tmp_path / "maps.zarr"
+    code = _CHILD.format(tests=os.path.join(ROOT, "tests"), cube=str(d / "cube.zarr"), out=str(out))
+    child = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    markers = tmp_path / "maps.zarr.regions"
+    deadline = time.time() + 240
+    while time.time() < deadline and child.poll() is None:
+        if markers.exists() and len(list(markers.glob("*_*"))) >= 2:
+            break
+        time.sleep(0.05)
+    assert child.poll() is None, child.communicate()[1][-2000:]
+    child.send_signal(signal.SIGKILL)  # killed while it works on the next regions
+    child.wait()
+    done_before = {p.name for p in markers.glob("*_*") if not p.name.endswith(".tmp")}
+    assert 2 <= len(done_before) < 6  # 6 regions of 4 × 3 pixels: killed mid-way
+    resumed = fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=out, **OPTIONS).load()
+    for name in maps.data_vars:
+        np.testing.assert_array_equal(resumed[name].values, maps[name].values, err_msg=name)
+
+
+@pytest.mark.slow
+def test_local_cluster_of_two_processes_gives_identical_maps(local_run, tmp_path):
+    pytest.importorskip("distributed")
+    d, maps = local_run
+    remote = fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=tmp_path / "maps.zarr", client="processes",
+                      n_workers=2, **OPTIONS).load()
+    for name in maps.data_vars:
+        np.testing.assert_array_equal(remote[name].values, maps[name].values, err_msg=name)

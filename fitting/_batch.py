@@ -18,7 +18,6 @@ sees both the coated samples and the uncoated background.
 from __future__ import annotations
 
 import dataclasses
-import sys
 from typing import Callable, Optional, Union
 
 import jax
@@ -31,8 +30,10 @@ from ._objective import Dataset, Objective
 from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
-from ._results import linearised_covariance
-from ._solve import HOST_METHODS, SolverOptions, compiled_fit, result_message, starting_point
+from ._results import build_result
+from ._solve import HOST_METHODS, SolverOptions, bound_note, compiled_fit, finish_on_bounds, starting_point
+from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
+from ._status import CONVERGED, INVALID_DATA, result_message
 
 __all__ = ["BatchResult", "fit_batch", "calibration_series", "background_rho_g"]
 
@@ -42,11 +43,19 @@ class BatchResult:
     """Outcome of :func:`fit_batch`, one row per fit.
 
     Attributes:
-        x, stderr: ``(N, P)`` physical values and standard errors (NaN where not identifiable);
+        x, stderr: ``(N, P)`` physical values and standard errors (NaN where not identifiable,
+            and for fits not made);
         values, errors: ``{name: (N, *shape)}`` per parameter;
-        converged: ``(N,)`` bool; result_code ``(N,)``; num_steps ``(N,)``;
-        chi2, reduced_chi2: ``(N,)``; rank: ``(N,)`` of the normalised Jacobian;
-        covariance_scaled: True if uncertainties are scaled by each fit's reduced χ².
+        converged: ``(N,)`` bool (the solver met its tolerance); result_code ``(N,)``
+            (:data:`fitting._status.STATUS`); num_steps ``(N,)``;
+        chi2, reduced_chi2: ``(N,)``; dof: degrees of freedom of each fit; rank: ``(N,)`` of the
+            normalised Jacobian; unresolved: ``(N, P)`` components the data do not determine;
+        covariance_scaled: True if uncertainties are scaled by each fit's reduced χ²;
+            sigma_origin: ``"given"``, ``"estimated from residuals"`` or ``"default 1 — χ² not
+            meaningful"``;
+        at_bound: ``(N, P)`` components on a bound; finished_on_bound: ``(N,)`` fits of an
+            unconstrained method finished by L-BFGS-B on a bound;
+        invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
         wall_time_s: wall-clock time of the batch, seconds.
         results: with ``fit_batch(..., full_results=True)``, one :class:`~fitting.FitResult` per
             fit (report, residual spectra, covariance, plot, JSON), else None.
@@ -71,14 +80,21 @@ class BatchResult:
     covariance_scaled: bool
     wall_time_s: float = float("nan")
     results: Optional[list] = None
+    dof: int = 0
+    sigma_origin: str = ""
+    unresolved: Optional[np.ndarray] = None
+    at_bound: Optional[np.ndarray] = None
+    finished_on_bound: Optional[np.ndarray] = None
+    invalid_data: dict = dataclasses.field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
     @property
     def reasons(self) -> list:
-        """Reason text of each fit."""
-        return [result_message(c) for c in self.result_code]
+        """Reason text of each fit (the library's words, :data:`fitting._status.STATUS`)."""
+        return [result_message(c) + (f": {self.invalid_data[i]}" if i in self.invalid_data else "")
+                for i, c in enumerate(self.result_code)]
 
     def summary(self) -> str:
         n = len(self)
@@ -87,37 +103,78 @@ class BatchResult:
         codes, counts = np.unique(self.result_code[~self.converged], return_counts=True)
         for c, k in zip(codes, counts):
             lines.append(f"  {k} × {result_message(int(c))}")
-        lines.append(f"  steps: median {np.median(self.num_steps):g}, max {self.num_steps.max()}")
-        lines.append(f"  reduced chi2: median {np.nanmedian(self.reduced_chi2):.4g}")
+        for i, msg in list(self.invalid_data.items())[:5]:
+            lines.append(f"    fit {i}: {msg}")
+        if self.finished_on_bound is not None and self.finished_on_bound.any():
+            lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) reached a bound: {self.method} stalled there and "
+                         "L-BFGS-B finished them (bounds kept exactly)")
+        if self.at_bound is not None and self.at_bound.any():
+            per = self.at_bound.sum(axis=0)
+            lines.append("  on a bound: " + ", ".join(f"{nm} in {k} fit(s)" for nm, k in zip(self.names, per) if k))
+        made = self.result_code != INVALID_DATA
+        if made.any():
+            lines.append(f"  steps: median {np.median(self.num_steps[made]):g}, max {self.num_steps[made].max()}")
+        if self.sigma_origin == SIGMA_GIVEN or (self.sigma_origin != SIGMA_DEFAULT and self.covariance_scaled
+                                                 and self.objective.sigma_given):
+            lines.append(f"  reduced chi2: median {np.nanmedian(self.reduced_chi2) if made.any() else np.nan:.4g} "
+                         f"(dof {self.dof}, σ given)")
+        else:
+            lines.append(f"  no σ given: χ² not meaningful; σ {self.sigma_origin}")
         deficient = int((self.rank < self.x.shape[1]).sum())
         if deficient:
             lines.append(f"  {deficient} fit(s) with a non-identifiable parameter combination (rank deficient)")
         return "\n".join(lines)
 
 
-def _progress_callback(progress) -> Optional[Callable[[int, int], None]]:
-    if progress is None or progress is False:
+def _progress_callback(progress, n_chunks: int) -> Optional[Callable[[int, int], None]]:
+    """``progress``: a callback, True (a tqdm bar), False, or None (a bar when there are
+    several chunks)."""
+    if progress is False or (progress is None and n_chunks <= 1):
         return None
     if callable(progress):
         return progress
-    try:  # optional nicety
-        from tqdm.auto import tqdm  # type: ignore
+    from tqdm.auto import tqdm
 
-        bar = {}
+    bar = {}
 
-        def tq(done, total):
-            if "bar" not in bar:
-                bar["bar"] = tqdm(total=total, unit="fit")
-            bar["bar"].update(done - bar["bar"].n)
-            if done >= total:
-                bar["bar"].close()
+    def tq(done, total):
+        if "bar" not in bar:
+            bar["bar"] = tqdm(total=total, unit="fit", desc="fit_batch")
+        bar["bar"].update(done - bar["bar"].n)
+        if done >= total:
+            bar["bar"].close()
 
-        return tq
-    except ImportError:
-        def plain(done, total):
-            print(f"\rfitting: {done}/{total}", end="\n" if done >= total else "", file=sys.stderr, flush=True)
+    return tq
 
-        return plain
+
+def _rows(data, n):
+    return [np.asarray(d)[n] for d in data]
+
+
+def _screen(objective: Objective, data):
+    """``(args, n, good, invalid)``: the checked batch args of the fits whose data pass the
+    objective's checks, their row indices ``good`` and ``{row: message}`` of the others.
+    A problem common to every fit (shapes, counts) raises as before."""
+    data = list(data) if isinstance(data, (list, tuple)) else [data]
+    try:
+        args, n = objective.batch_args(data)
+        return args, n, np.arange(n), {}
+    except LayerstackError as first:
+        sizes = {np.shape(d)[0] if np.ndim(d) >= 2 else None for d in data}
+        if len(sizes) != 1 or None in sizes:
+            raise
+        n = sizes.pop()
+        invalid = {}
+        for i in range(n):  # only when some fit's data fail: find which
+            try:
+                objective.batch_args(_rows(data, slice(i, i + 1)))
+            except LayerstackError as e:
+                invalid[i] = str(e)
+        good = np.array([i for i in range(n) if i not in invalid], dtype=int)
+        if good.size == 0:
+            raise first
+        args, _ = objective.batch_args(_rows(data, good))
+        return args, n, good, invalid
 
 
 def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int = 128,
@@ -133,10 +190,17 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         method, max_steps, rtol, atol, gtol, scale_covariance, rank_rtol: as :func:`~fitting.fit`.
         chunk_size: fits per compiled call (memory bound); N is processed in ⌈N/chunk⌉ calls
             of the same compiled function.
-        progress: a callback ``f(done, total)`` called after each chunk, or True for a
-            progress bar (tqdm if installed, else a line on stderr).
+        progress: a callback ``f(done, total)`` called after each chunk, True for a tqdm
+            progress bar, False for none; default: a bar when there is more than one chunk.
         full_results: also build a full :class:`~fitting.FitResult` per fit
             (``BatchResult.results``; memory grows with N: for tens or hundreds of fits).
+
+    A fit whose data fail the objective's checks (NaN, a negative reflectance …) is not made:
+    it is flagged in its own row (status ``INVALID_DATA``, NaN values, the reason in
+    ``invalid_data``) and the others are fitted as usual. A fit of an unconstrained method that
+    stalls on a bound is finished by L-BFGS-B (``finished_on_bound``), as in :func:`~fitting.fit`.
+    The statistics are those of :func:`~fitting.fit` (:func:`fitting._statistics.fit_statistics`):
+    the same numbers for the same data.
 
     Data are in the unit each dataset's geometry reads (a dimensionless reflectance or
     reflectance factor, 1/sr for BRDF, degrees for ψ/Δ). Returns a :class:`BatchResult` with
@@ -155,7 +219,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         raise LayerstackError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     if objective.n_parameters == 0:
         raise LayerstackError("the objective has no free parameter")
-    (ys, ws), n = objective.batch_args(data)
+    (ys, ws), n_all, good, invalid = _screen(objective, data)
+    n = good.size
     chunk = min(chunk_size, n)
     n_chunks = -(-n // chunk)
     pad = n_chunks * chunk - n
@@ -165,7 +230,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)
-    report = _progress_callback(progress)
+    report = _progress_callback(progress, n_chunks)
     outs = []
     for c in range(n_chunks):
         sl = slice(c * chunk, (c + 1) * chunk)
@@ -173,32 +238,47 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         outs.append(jax.tree.map(np.asarray, out))
         if report is not None:
             report(min((c + 1) * chunk, n), n)
-    x, steps, code, _model, res, pen, J = (
-        np.concatenate([o_[k] for o_ in outs])[:n] if not isinstance(outs[0][k], tuple)
-        else tuple(np.concatenate([o_[k][j] for o_ in outs])[:n] for j in range(len(outs[0][k])))
-        for k in range(7)
-    )
+    out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
+    args = (tuple(np.asarray(y)[:n] for y in ys), tuple(np.asarray(w)[:n] for w in ws))
+    out, finished = finish_on_bounds(objective, o, out, args)
     layout = objective.layout
-    chi2 = sum(np.sum(r ** 2, axis=(-2, -1)) for r in res)
-    dof = objective.n_points - layout.size
-    red = chi2 / dof if dof > 0 else np.full(n, np.nan)
-    scaled = (not objective.sigma_given) if scale_covariance is None else bool(scale_covariance)
-    cov, sv, rank, _, _ = linearised_covariance(J, x, layout.scale, rank_rtol)
-    if scaled:
-        cov = cov * red[:, None, None]
-    err = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1), 0, None))
-    err = np.where((rank < layout.size)[:, None], np.nan, err)
-    values = layout.values(x)
-    errors = layout.values(err, fill=np.nan)
+    stats = fit_statistics(out.jacobian, out.x, out.residuals, layout, objective.n_points,
+                           sigma_given=objective.sigma_given, scale_covariance=scale_covariance, rank_rtol=rank_rtol)
+    lo, hi = bound_contacts(out.x, layout.lower, layout.upper, layout.scale)
     full = None
     if full_results:
-        from ._results import build_result
+        full = [None] * n_all
+        for k, i in enumerate(good):
+            row = jax.tree.map(lambda a: a[k], out)
+            names = [nm for nm, b in zip(layout.names, lo[k] | hi[k]) if b]
+            full[i] = build_result(objective, o, row, jax.tree.map(lambda a: a[k], args),
+                                   scale_covariance=scale_covariance, rank_rtol=rank_rtol,
+                                   note=bound_note(method, names, bool(finished[k])), stats=_row(stats, k))
 
-        full = [build_result(objective, o, x[i], int(steps[i]), int(code[i]), [m[i] for m in _model],
-                             [r[i] for r in res], pen[i], J[i], (tuple(y[i] for y in ys), tuple(w[i] for w in ws)),
-                             scale_covariance=scale_covariance, rank_rtol=rank_rtol) for i in range(n)]
-    return BatchResult(objective, method, list(layout.names), x, err, values, errors, code == 0, code, steps, chi2,
-                       red, rank, scaled, time.perf_counter() - start_time, full)
+    def spread(a, fill):  # rows of the fits made -> all N rows
+        a = np.asarray(a)
+        full_a = np.full((n_all,) + a.shape[1:], fill, dtype=np.result_type(a, type(fill)))
+        full_a[good] = a
+        return full_a
+
+    x = spread(out.x, np.nan)
+    err = spread(stats.stderr, np.nan)
+    code = spread(out.status, INVALID_DATA)
+    return BatchResult(
+        objective, method, list(layout.names), x, err, layout.values(x), layout.values(err, fill=np.nan),
+        code == CONVERGED, code, spread(out.num_steps, 0), spread(stats.chi2, np.nan),
+        spread(stats.reduced_chi2, np.nan), spread(stats.rank, layout.size),
+        stats.sigma_origin not in (SIGMA_GIVEN, SIGMA_DEFAULT), time.perf_counter() - start_time, full,
+        dof=stats.dof, sigma_origin=stats.sigma_origin, unresolved=spread(stats.unresolved, False),
+        at_bound=spread(lo | hi, False), finished_on_bound=spread(finished, False), invalid_data=invalid,
+    )
+
+
+def _row(stats: FitStatistics, k: int) -> FitStatistics:
+    """Row ``k`` of a batch's statistics."""
+    per_fit = ("chi2", "reduced_chi2", "s2", "covariance", "stderr", "correlation", "singular_values", "rank",
+               "null_vectors", "log_directions", "unresolved", "zero_columns")
+    return stats._replace(**{f: np.asarray(getattr(stats, f))[k] for f in per_fit})
 
 
 def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1.5, ambient: float = 1.0,

@@ -1,17 +1,20 @@
-r"""Fit results: values, uncertainties, identifiability, report, JSON and plot.
+r"""Fit results: values, uncertainties, identifiability, a report that tells the truth, JSON
+and plot.
 
-Uncertainties come from the Jacobian :math:`J` of the weighted residuals at the solution
-(linearised least squares): :math:`C = s^2 (J^\top J)^{-1}`, with :math:`s^2 = 1` when every
-dataset gives its σ (absolute covariance) or :math:`s^2 = \chi^2/(N-P)` otherwise (scaled by
-the reduced χ²); the report says which.
+The numbers (χ², degrees of freedom, covariance, standard errors, correlations, singular values,
+unresolved components, parameters on a bound) come from :mod:`fitting._statistics`, the one
+computation shared with :func:`~fitting.fit_batch`. This module turns them into words:
 
-Identifiability: the SVD of the Jacobian taken w.r.t. :math:`\ln x` (relative changes; w.r.t.
-:math:`x/s` for a parameter at 0) with unit-norm columns. A singular value below ``rank_rtol``
-× the largest marks a direction :math:`\delta\ln x` along which the data do not change: the
-parameters involved are reported as a combination (for two parameters with directions
-:math:`w_1, w_2`, only :math:`x_1 x_2^{-w_1/w_2}` is determined, e.g. α·h of an incoherent
-layer) instead of arbitrary values with huge errors. The covariance is then the pseudo-inverse
-on the identifiable subspace, and the standard errors of the parameters involved are NaN.
+* **convergence** — "converged" only when the solver met its tolerance (:data:`STATUS`);
+* **fit quality** — a separate verdict: χ²/ν with ν, a plain warning when it is implausible
+  (≫ 1 or ≪ 1 with σ given; no σ given: χ² is not meaningful and σ is estimated from the
+  residuals), and data > 1 of a reflectance that suggest percent;
+* **σ used and its origin** — "given", "estimated from residuals" or "default 1 — χ² not
+  meaningful";
+* **parameters on a bound** — named with value and bound;
+* **parameters the data cannot separate** — null directions of the normalised Jacobian
+  (singular value below ``rank_rtol`` × the largest; only a combination such as α·h is
+  determined) and pairs with |ρ| > 0.99, whatever the rank test says.
 """
 
 from __future__ import annotations
@@ -24,46 +27,13 @@ from typing import Optional
 
 import numpy as np
 
-from layerstack_jax import LayerstackError
-
 from ._objective import Objective
+from ._status import CONVERGED, result_message
+from ._statistics import (CORRELATION_LIMIT, SIGMA_DEFAULT, SIGMA_GIVEN, bound_contacts, fit_statistics,
+                          linearised_covariance, strong_correlations)
 
-__all__ = ["FitResult", "linearised_covariance", "build_result"]
-
-
-def linearised_covariance(J, x, scale, rank_rtol: float):
-    """Covariance of ``x`` (unit residual variance) from ``J = ∂r/∂(x/scale)``; works on
-    stacked problems (leading batch axes).
-
-    Returns ``(cov, singular_values, rank, null_vectors, log_directions)``: ``null_vectors``
-    ``(..., P, P)`` rows of :math:`V^\\top` (only those beyond ``rank`` are null) in normalised
-    coordinates, ``log_directions`` the same mapped to :math:`\\delta\\ln x` (or
-    :math:`\\delta x/s` for x = 0), each scaled to max 1.
-    """
-    J = np.asarray(J, float)
-    x = np.asarray(x, float)
-    rel = np.where(x != 0, np.abs(x) / scale, 1.0)  # d/d ln x = (|x|/s) d/d(x/s)
-    Jr = J * rel[..., None, :]
-    norms = np.linalg.norm(Jr, axis=-2)
-    safe = np.where(norms > 0, norms, 1.0)
-    Jn = Jr / safe[..., None, :]
-    # a fit that ended on non-finite values has no linearisation: NaN covariance, no rank claim
-    bad = ~np.all(np.isfinite(Jn), axis=(-2, -1))
-    Jn = np.where(bad[..., None, None], 0.0, Jn)
-    _, sv, Vt = np.linalg.svd(Jn, full_matrices=False)
-    top = sv[..., :1]
-    keep = (sv > rank_rtol * top) & (top > 0)
-    rank = np.where(bad, J.shape[-1], keep.sum(axis=-1))
-    sv = np.where(bad[..., None], np.nan, sv)
-    inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
-    cov_n = np.einsum("...ki,...k,...kj->...ij", Vt, inv, Vt)
-    a = rel / safe  # J = Jn diag(1/a)
-    cov_z = cov_n * a[..., :, None] * a[..., None, :]
-    cov = cov_z * scale[..., :, None] * scale[..., None, :]
-    cov = np.where(bad[..., None, None], np.nan, cov)
-    dirs = Vt / safe[..., None, :]
-    dirs = dirs / np.maximum(np.max(np.abs(dirs), axis=-1, keepdims=True), 1e-300)
-    return cov, sv, rank, Vt, dirs
+__all__ = ["FitResult", "linearised_covariance", "build_result", "quality_verdict", "percent_warnings",
+           "bounds_hit", "not_separated"]
 
 
 def _fmt(v: float, e: Optional[float] = None) -> str:
@@ -82,6 +52,79 @@ def _combination(groups: list[tuple[str, float]]) -> str:
     return ", ".join(n for n, _ in groups)
 
 
+def _mask(objective: Objective) -> tuple:
+    """Used-point masks of the objective's datasets."""
+    # TODO(objective): a public ``Objective.mask`` (tuple of (samples, wl) bool arrays) is asked
+    # for; until it exists the private attribute is read here, in this one place.
+    m = getattr(objective, "mask", None)
+    return tuple(m) if m is not None else objective._mask
+
+
+def quality_verdict(reduced_chi2: float, dof: int, sigma_given: bool, s: float) -> tuple[str, list]:
+    """Plain verdict on the fit quality: ``(verdict, warnings)``.
+
+    With σ given, χ²/ν of a correct model lies within 1 ± 5√(2/ν) but for a chance of about
+    1e-6; outside that band and beyond a factor 2, the fit is implausible: the model misses
+    the data (or σ is too small), resp. σ is too large. Without σ, the χ² computed with σ = 1
+    says nothing: the verdict states the σ estimated from the residuals, ``s``."""
+    if dof <= 0:
+        return f"no degrees of freedom (ν = {dof}): χ² cannot judge the fit", [
+            f"{-dof + 0} more parameters than data points: the fit is underdetermined" if dof < 0 else
+            "as many parameters as data points: nothing is left to judge the fit by"]
+    if not sigma_given:
+        return (f"no σ given: χ² with σ = 1 is not meaningful; σ estimated from the residuals "
+                f"s = {s:.3g} (ν = {dof})"), []
+    band = 5.0 * math.sqrt(2.0 / dof)
+    text = f"χ²/ν = {reduced_chi2:.4g} with ν = {dof} degrees of freedom (σ given)"
+    if not np.isfinite(reduced_chi2):
+        return text, ["χ² is not finite: the fit failed"]
+    if reduced_chi2 > max(2.0, 1.0 + band):
+        return text + ": implausibly large", [
+            f"χ²/ν = {reduced_chi2:.4g} ≫ 1: the model does not describe the data within the given σ "
+            f"(or σ is underestimated by a factor ~{math.sqrt(reduced_chi2):.3g}); the standard errors, "
+            "computed from the given σ, are then too small"]
+    if reduced_chi2 < min(0.5, 1.0 - band):
+        return text + ": implausibly small", [
+            f"χ²/ν = {reduced_chi2:.4g} ≪ 1: the given σ is larger than the scatter of the data "
+            f"(overestimated by a factor ~{1 / math.sqrt(max(reduced_chi2, 1e-300)):.3g}); the standard errors "
+            "are then too large"]
+    return text + ": consistent with the noise", []
+
+
+def percent_warnings(objective: Objective, data: list) -> list:
+    """Warnings for data above 1 of a geometry that reads a fraction (reflectance,
+    transmittance, reflectance factor; not BRDF in 1/sr, ψ/Δ or CIELAB): most likely percent."""
+    out = []
+    for ds, d in zip(objective.datasets, data):
+        if ds.colour is not None or not getattr(ds.geometry, "reading_is_fraction", True):
+            continue
+        top = float(np.nanmax(d)) if np.any(np.isfinite(d)) else float("nan")
+        if top > 1.0:
+            out.append(f"dataset {ds.label}: data reach {top:.4g} > 1 — a reflectance is a fraction; are these "
+                       "percent? (divide by 100)")
+    return out
+
+
+def bounds_hit(layout, x) -> list:
+    """``[{"parameter", "value", "bound", "side"}]`` for the components of ``x`` on a bound."""
+    lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale)
+    return [{"parameter": n, "value": float(v), "bound": float(layout.lower[j] if lo[j] else layout.upper[j]),
+             "side": "lower" if lo[j] else "upper"}
+            for j, (n, v) in enumerate(zip(layout.names, x)) if lo[j] or hi[j]]
+
+
+def not_separated(names, correlation, non_identifiable: list, limit: float = CORRELATION_LIMIT) -> list:
+    """Pairs of parameters the data cannot separate: ``[{"parameters", "correlation"}]`` with
+    |ρ| > ``limit`` (the ±1 limit for pairs on a null direction), whatever the rank test says."""
+    out = [{"parameters": [names[i], names[j]], "correlation": rho} for i, j, rho in strong_correlations(correlation, limit)]
+    listed = {tuple(sorted(p["parameters"])) for p in out}
+    for item in non_identifiable:  # a null direction of one component, or of components whose ρ is NaN
+        key = tuple(sorted(item["parameters"]))
+        if len(key) != 2 and key not in listed:
+            out.append({"parameters": list(item["parameters"]), "correlation": None})
+    return out
+
+
 @dataclasses.dataclass
 class FitResult:
     """Outcome of :func:`~fitting.fit`.
@@ -92,14 +135,24 @@ class FitResult:
             identifiable); ``spectra``: ``{name: B c}`` on the model grid for spectral ones.
         x, x_stderr, names: flat physical vector, its standard errors and component names.
         covariance, correlation: ``(P, P)``; ``covariance_scaled``: True if scaled by the
-            reduced χ² (no σ given), False if from the given σ.
+            reduced χ² (σ estimated from the residuals), False if from the given σ.
         chi2, reduced_chi2, dof, n_points: goodness of fit (data only, not penalties);
             ``cost``: the full objective :math:`\\tfrac12\\|r\\|^2` with penalties.
         model, data, residuals: per dataset ``(samples, wl)``; residuals = model − data,
             NaN at masked points.
-        num_steps, converged, reason, result_code: solver outcome.
+        num_steps, converged, reason, result_code: solver outcome (``converged``: the solver
+            met its tolerance; :data:`fitting._solve.STATUS`).
         singular_values, rank: of the normalised Jacobian; ``non_identifiable``: list of
             ``{"parameters", "direction", "combination"}``.
+        sigma_origin: σ behind the standard errors: ``"given"``, ``"estimated from residuals"``
+            or ``"default 1 — χ² not meaningful"``; ``sigma_given``: every dataset gives σ;
+            ``sigma_estimate``: :math:`\\sqrt{\\chi^2/\\nu}` (the σ estimated from the
+            residuals, in units of the given σ or, without σ, of the data).
+        quality: the verdict on the fit quality; ``warnings``: plain warnings (implausible χ²,
+            percent data, bounds, inseparable parameters, non-convergence).
+        at_bound: ``[{"parameter", "value", "bound", "side"}]``; ``not_separated``:
+            ``[{"parameters", "correlation"}]``; ``note``: what the solver layer did besides the
+            chosen method (e.g. finished on a bound by L-BFGS-B).
 
     Values and errors are in each parameter's own unit (nm for thicknesses, 1/nm for α,
     dimensionless for n and ρg); ``model``, ``data`` and ``residuals`` in the unit the
@@ -134,6 +187,15 @@ class FitResult:
     non_identifiable: list
     starts: int = 1
     starts_converged: Optional[int] = None
+    sigma_origin: str = SIGMA_GIVEN
+    sigma_given: bool = True
+    sigma_estimate: float = float("nan")
+    quality: str = ""
+    warnings: list = dataclasses.field(default_factory=list)
+    at_bound: list = dataclasses.field(default_factory=list)
+    not_separated: list = dataclasses.field(default_factory=list)
+    note: str = ""
+    rank_rtol: float = 1e-8
 
     @property
     def identifiable(self) -> bool:
@@ -143,32 +205,57 @@ class FitResult:
         """The fitted :class:`~layerstack_jax.Stack` of ``sample``."""
         return self.objective.stack_for(self.x, sample)
 
+    def _sigma_line(self) -> str:
+        if self.sigma_origin == SIGMA_GIVEN:
+            return "given (uncertainties from the given σ, not rescaled)"
+        if self.sigma_given:
+            return (f"estimated from residuals: the given σ × {self.sigma_estimate:.3g} "
+                    "(uncertainties rescaled by χ²/ν on request)")
+        if self.sigma_origin == SIGMA_DEFAULT:
+            return SIGMA_DEFAULT + " (no σ given and no rescaling requested: uncertainties are not meaningful)"
+        return (f"estimated from residuals: s = {self.sigma_estimate:.3g} (no σ given; χ² computed with the "
+                "default σ = 1 is not meaningful)")
+
     # ----------------------------------------------------------------- report
     def report(self) -> str:
-        """Readable text report."""
+        """Readable text report (see the module docstring for what it states)."""
         obj = self.objective
+        conv = (f"yes — the solver met its tolerance after {self.num_steps} steps" if self.converged
+                else f"NO — {self.reason} (after {self.num_steps} steps)")
         lines = [
             "layerstack fit report",
             "=====================",
             f"method            {self.method}" + (f" (multi-start: {self.starts_converged}/{self.starts} starts converged)"
                                                   if self.starts > 1 else ""),
-            f"converged         {'yes' if self.converged else 'NO'} ({self.reason}) after {self.num_steps} steps",
+            f"converged         {conv}",
+        ]
+        if self.note:
+            lines.append(f"note              {self.note}")
+        lines += [
+            f"fit quality       {self.quality}",
             f"data              {self.n_points} points in {len(obj.datasets)} dataset(s) × {obj.n_samples} sample(s): "
             + ", ".join(ds.label for ds in obj.datasets),
-            f"chi2              {self.chi2:.6g}   reduced chi2 {self.reduced_chi2:.6g}   (dof {self.dof})",
-            "uncertainties     " + ("scaled by the reduced chi2 (no sigma given)" if self.covariance_scaled
-                                    else "from the given sigma (not rescaled)"),
-            "",
-            "parameters",
-            "----------",
+            f"sigma             {self._sigma_line()}",
         ]
+        if self.sigma_given:
+            lines.append(f"chi2              {self.chi2:.6g}   reduced chi2 {self.reduced_chi2:.6g}   (dof {self.dof})")
+        else:
+            lines.append(f"chi2              not meaningful without σ (sum of squared residuals {self.chi2:.4g}, dof {self.dof})")
+        for w in self.warnings:
+            lines.append(f"WARNING           {w}")
+        lines += ["", "parameters", "----------"]
+        on_bound = {b["parameter"]: b for b in self.at_bound}
         for p in obj.layout.params:
             v, e = np.asarray(self.values[p.name]), np.asarray(self.stderr[p.name])
             lo, hi = p.lower.min(), p.upper.max()
             bounds = f"[{lo:g}, {hi:g}]"
             kind = "per sample" if p.per_sample else "shared"
             if v.size == 1:
-                lines.append(f"  {p.name:<24} {_fmt(float(v.ravel()[0]), float(e.ravel()[0])):<28} {kind}, bounds {bounds}")
+                tag = ""
+                if p.name in on_bound:
+                    b = on_bound[p.name]
+                    tag = f"  AT {b['side'].upper()} BOUND {b['bound']:g}"
+                lines.append(f"  {p.name:<24} {_fmt(float(v.ravel()[0]), float(e.ravel()[0])):<28} {kind}, bounds {bounds}{tag}")
             else:
                 what = "basis" if p.basis is not None and p.basis.shape[1] != p.basis.shape[0] else "values"
                 lines.append(f"  {p.name:<24} {v.size} {what} ({kind}, bounds {bounds}):")
@@ -177,29 +264,27 @@ class FitResult:
                     value = _fmt(float(v[idx]), float(e[idx]))
                     if p.fixed.reshape(v.shape)[idx]:
                         value += " (fixed)"
+                    b = on_bound.get(p.name + lab)
+                    if b is not None:
+                        value += f"  AT {b['side'].upper()} BOUND {b['bound']:g}"
                     lines.append(f"      {lab:<12} {value}")
-        lo_all, hi_all, sc = obj.layout.lower, obj.layout.upper, obj.layout.scale
-        tol = 1e-9 * sc
-        at_bound = [n for n, xv, lo, hi, t in zip(self.names, self.x, lo_all, hi_all, tol)
-                    if abs(xv - lo) <= t or abs(hi - xv) <= t]
-        if at_bound:
-            lines.append(f"  on a bound: {', '.join(at_bound)}")
+        if self.at_bound:
+            lines.append("  on a bound: " + "; ".join(f"{b['parameter']} = {b['value']:g} ({b['side']} bound {b['bound']:g})"
+                                                     for b in self.at_bound))
         lines += ["", "identifiability", "---------------"]
         sv = self.singular_values
-        lines.append(f"  rank {self.rank} of {len(self.x)}; normalised singular values {sv.max():.3g} … {sv.min():.3g}")
-        if not self.non_identifiable:
+        lines.append(f"  rank {self.rank} of {len(self.x)} (singular values of the normalised Jacobian below "
+                     f"{self.rank_rtol:g} × the largest count as zero); {np.nanmax(sv):.3g} … {np.nanmin(sv):.3g}")
+        if not self.non_identifiable and not self.not_separated:
             lines.append("  all parameters are identifiable from these data")
         for item in self.non_identifiable:
             lines.append(f"  NOT IDENTIFIABLE: {item['combination']}")
             lines.append(f"    moving along {item['direction']} leaves the spectra unchanged;")
             lines.append("    the values of these parameters are arbitrary along it (standard errors not reported)")
-        if len(self.x) > 1:
-            corr = self.correlation
-            pairs = [(abs(corr[i, j]), i, j) for i in range(len(self.x)) for j in range(i) if np.isfinite(corr[i, j])]
-            strong = sorted([p for p in pairs if p[0] > 0.95], reverse=True)[:5]
-            if strong:
-                lines.append("  strong correlations: " + "; ".join(
-                    f"{self.names[i]} / {self.names[j]} {corr[i, j]:+.3f}" for _, i, j in strong))
+        for item in self.not_separated:
+            rho = item["correlation"]
+            lines.append(f"  NOT SEPARATED by the data: {' / '.join(item['parameters'])}"
+                         + (f" (correlation {rho:+.4f}, |ρ| > {CORRELATION_LIMIT:g})" if rho is not None else ""))
         lines += ["", "residuals (model - data)", "------------------------"]
         for ds, r in zip(obj.datasets, self.residuals):
             rms = np.sqrt(np.nanmean(r ** 2, axis=-1))
@@ -222,9 +307,14 @@ class FitResult:
             "method": self.method,
             "converged": bool(self.converged),
             "reason": self.reason,
+            "note": self.note,
             "num_steps": int(self.num_steps),
+            "quality": {"verdict": self.quality, "warnings": list(self.warnings)},
+            "sigma": {"origin": self.sigma_origin, "given": bool(self.sigma_given),
+                      "estimated": clean(self.sigma_estimate)},
             "chi2": clean(self.chi2),
             "reduced_chi2": clean(self.reduced_chi2),
+            "chi2_meaningful": bool(self.sigma_given),
             "dof": int(self.dof),
             "n_points": int(self.n_points),
             "uncertainty_scaling": "reduced_chi2" if self.covariance_scaled else "given_sigma",
@@ -241,13 +331,16 @@ class FitResult:
                 }
                 for p in obj.layout.params
             },
+            "at_bound": self.at_bound,
             "names": list(self.names),
             "covariance": clean(self.covariance),
             "correlation": clean(self.correlation),
             "identifiability": {
                 "rank": int(self.rank),
+                "rank_rtol": float(self.rank_rtol),
                 "singular_values": clean(self.singular_values),
                 "non_identifiable": self.non_identifiable,
+                "not_separated": self.not_separated,
             },
             "wavelength_nm": clean(obj.wavelength),
             "datasets": [
@@ -280,13 +373,12 @@ class FitResult:
         wl = obj.wavelength
         for k, ds in enumerate(obj.datasets):
             top, bottom = axes[0, k], axes[1, k]
-            mask = obj._mask[k]
             rows = obj.samples_of(k)
             lab = ds.colour is not None
             x = np.arange(3) if lab else wl
             for s in range(rows):
                 color = f"C{s % 10}"
-                y = np.where(mask[s], self.data[k][s], np.nan)
+                y = self.data[k][s]  # NaN at masked points
                 top.plot(x, y, "o" if lab else ".", ms=6 if lab else 3, color=color, alpha=0.6)
                 top.plot(x, self.model[k][s], "x" if lab else "-", ms=8, lw=1.4, color=color,
                          label=f"sample {s}" if rows > 1 else "fit")
@@ -301,14 +393,17 @@ class FitResult:
             bottom.set_xlabel("CIELAB coordinate" if lab else "wavelength (nm)")
             bottom.set_ylabel("model − data")
             bottom.grid(True, alpha=0.3)
-        status = "converged" if self.converged else f"NOT converged ({self.reason})"
-        fig.suptitle(f"{title + ': ' if title else ''}fit ({self.method}, {status}), reduced χ² {self.reduced_chi2:.3g}",
-                     fontsize=11)
+        status = "converged" if self.converged else "NOT converged"
+        quality = (f"χ²/ν {self.reduced_chi2:.3g} (ν = {self.dof})" if self.sigma_given
+                   else f"no σ given: σ from residuals {self.sigma_estimate:.3g}")
+        fig.suptitle(f"{title + ': ' if title else ''}fit ({self.method}, {status}), {quality}"
+                     + (" — see warnings" if self.warnings else ""), fontsize=11)
         if path is not None:
             p = Path(path)
             p.parent.mkdir(parents=True, exist_ok=True)
             fig.savefig(p)
         return fig
+
 
 
 def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.ndarray]:
@@ -349,37 +444,54 @@ def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.
     return out, involved
 
 
-def build_result(objective: Objective, options, x, steps, code, model, res, pen, J, args, *,
-                 scale_covariance, rank_rtol, starts=1, starts_converged=None) -> FitResult:
-    from ._solve import result_message
-
+def build_result(objective: Objective, options, out, args, *, scale_covariance, rank_rtol, starts=1,
+                 starts_converged=None, note: str = "", stats=None) -> FitResult:
+    """:class:`FitResult` of one fit from its :class:`~fitting._solve.FitOutput` ``out``
+    (NumPy, no batch axis) and data ``args``; ``stats``: its :class:`~fitting._statistics.FitStatistics`
+    when already computed (a row of a batch's), else computed here by the same function."""
     layout = objective.layout
-    chi2 = float(sum(np.sum(r ** 2) for r in res))
-    n_points = objective.n_points
-    P = layout.size
-    dof = n_points - P
-    scaled = (not objective.sigma_given) if scale_covariance is None else bool(scale_covariance)
-    red = chi2 / dof if dof > 0 else math.nan
-    cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
-    norms_zero = np.linalg.norm(J, axis=0) == 0
-    non_ident, involved = _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero)
-    if scaled:
-        cov = cov * red
-    err = np.sqrt(np.clip(np.diag(cov), 0, None))
-    err = np.where(involved, np.nan, err)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(err, err)
+    x = np.asarray(out.x, float)
+    code = int(out.status)
+    res = [np.asarray(r) for r in out.residuals]
+    model = [np.asarray(m) for m in out.model]
+    J = np.asarray(out.jacobian)
+    if stats is None:
+        stats = fit_statistics(J, x, res, layout, objective.n_points, sigma_given=objective.sigma_given,
+                               scale_covariance=scale_covariance, rank_rtol=rank_rtol)
+    chi2, red, dof = float(stats.chi2), float(stats.reduced_chi2), int(stats.dof)
+    non_ident, _ = _non_identifiable(layout, stats.singular_values, stats.rank, stats.null_vectors,
+                                     stats.log_directions, stats.zero_columns)
+    err = np.asarray(stats.stderr)
     values = layout.values(x)
     stderr = layout.values(err, fill=np.nan)
     spectra = {p.name: p.spectrum(c) for p, c in zip(layout.params, layout.split(x)) if p.basis is not None}
+    masks = _mask(objective)
     data = [np.asarray(d) for d in args[0]]
-    residuals = [np.where(m, mod - d, np.nan) for m, mod, d in zip(objective._mask, model, data)]
+    residuals = [np.where(m, mod - d, np.nan) for m, mod, d in zip(masks, model, data)]
+    data = [np.where(m, d, np.nan) for m, d in zip(masks, data)]
+    pen = np.asarray(out.penalty)
     cost = 0.5 * (chi2 + float(np.sum(pen ** 2)))
+    s = math.sqrt(chi2 / dof) if dof > 0 and np.isfinite(chi2) else math.nan
+    verdict, warnings = quality_verdict(red, dof, objective.sigma_given, s)
+    warnings = warnings + percent_warnings(objective, data)
+    at_bound = bounds_hit(layout, x)
+    separated = not_separated(list(layout.names), stats.correlation, non_ident)
+    converged = code == CONVERGED
+    if not converged:
+        warnings.insert(0, f"the fit did not converge ({result_message(code)}): the values are where the solver stopped")
+    if at_bound:
+        warnings.append("on a bound: " + ", ".join(b["parameter"] for b in at_bound)
+                        + " (the minimum within the bounds; its standard errors assume a free parameter)")
+    if separated:
+        warnings.append("the data cannot separate " + "; ".join(" / ".join(p["parameters"]) for p in separated))
     return FitResult(
         objective=objective, method=options.method, x=x, x_stderr=err, names=list(layout.names), values=values,
-        stderr=stderr, spectra=spectra, covariance=cov, correlation=corr, covariance_scaled=scaled, chi2=chi2,
-        reduced_chi2=red, dof=dof, n_points=n_points, cost=cost, model=model,
-        data=[np.where(m, d, np.nan) for m, d in zip(objective._mask, data)], residuals=residuals,
-        num_steps=steps, converged=code == 0, reason=result_message(code), result_code=code, singular_values=sv,
-        rank=int(rank), non_identifiable=non_ident, starts=starts, starts_converged=starts_converged,
+        stderr=stderr, spectra=spectra, covariance=np.asarray(stats.covariance), correlation=np.asarray(stats.correlation),
+        covariance_scaled=stats.sigma_origin not in (SIGMA_GIVEN, SIGMA_DEFAULT), chi2=chi2,
+        reduced_chi2=red, dof=dof, n_points=int(stats.n_points), cost=cost, model=model, data=data,
+        residuals=residuals, num_steps=int(out.num_steps), converged=converged, reason=result_message(code),
+        result_code=code, singular_values=np.asarray(stats.singular_values), rank=int(stats.rank),
+        non_identifiable=non_ident, starts=starts, starts_converged=starts_converged,
+        sigma_origin=stats.sigma_origin, sigma_given=bool(objective.sigma_given), sigma_estimate=s, quality=verdict,
+        warnings=warnings, at_bound=at_bound, not_separated=separated, note=note, rank_rtol=float(rank_rtol),
     )

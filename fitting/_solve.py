@@ -1,48 +1,60 @@
-r"""Solvers: optimistix least squares on unconstrained coordinates, jaxopt L-BFGS-B on bounded ones.
+r"""Solvers: one least-squares layer over optimistix (public API only) and the shared bounded
+L-BFGS-B driver (:mod:`fitting._bounded`).
 
-* ``"lm"`` (default): :class:`optimistix.LevenbergMarquardt`;
+* ``"lm"`` (default): Levenberg–Marquardt, composed from optimistix's parts
+  (:class:`optimistix.AbstractGaussNewton` with a damped Newton descent and a trust-region
+  search, :class:`LevenbergMarquardt`);
 * ``"gauss-newton"``: :class:`optimistix.GaussNewton`;
 * ``"dogleg"``: :class:`optimistix.Dogleg`;
 * ``"bfgs"``: :class:`optimistix.BFGS` on :math:`\tfrac12\|r\|^2`;
-* ``"lbfgsb"``: :class:`jaxopt.LBFGSB` on :math:`\tfrac12\|r\|^2` in :math:`z = x/s`, bounds kept
-  exactly. Use it when a parameter sits on a bound at the optimum (α = 0, ρg = 1, h = 0): the
-  transforms of the unconstrained solvers only approach a bound, slower and slower.
+* ``"lbfgsb"``: L-BFGS-B (:func:`fitting._bounded.compiled_lbfgsb`) on :math:`\tfrac12\|r\|^2`
+  in :math:`z = x/s`, bounds kept exactly. For optima on a bound (α = 0, ρg = 1, h = 0).
 * ``"trf"``: :func:`scipy.optimize.least_squares` (trust-region reflective, Branch, Coleman & Li)
   on :math:`z = x/s` with the bounds kept exactly, driven from the host with the compiled residuals
-  and the compiled forward-mode Jacobian. A bounded least-squares method: Gauss–Newton-fast like
-  LM, and it does not stall on a bound. The choice for large joint fits (calibration series with
-  α(λ) and ρg(λ) on bases) where some coefficients end on, or close to, a bound. Single fits and
-  multi-start (one host solve per start); not for :func:`~fitting.fit_batch`.
+  and the compiled forward-mode Jacobian. Gauss–Newton-fast like LM, and it does not stall on a
+  bound: the choice for large joint fits (calibration series with α(λ) and ρg(λ) on bases).
+  Single fits and multi-start (one host solve per start); not for :func:`~fitting.fit_batch`.
+
+The unconstrained solvers (``lm``, ``gauss-newton``, ``dogleg``, ``bfgs``) work on transformed
+coordinates that only approach a bound. When one of them ends at its step limit with a
+parameter on a bound, the fit is finished by the bounded L-BFGS-B from that point, and the
+result says so (:attr:`FitResult.note`); a minimum on a bound is then reported as converged.
 
 Each objective compiles one solve function per method and options (cached on the objective);
 data travel in ``args``, so later fits with other data — and batched fits, multi-start — reuse it.
-A fit never raises on non-convergence (``throw=False``): the result carries the flag and the
-reason.
+A fit never raises on non-convergence: the result carries a status (:data:`STATUS`) and the
+reason in the library's words.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Optional
+from typing import Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 
 from layerstack_jax import LayerstackError
 
+from ._bounded import compiled_lbfgsb
 from ._objective import Objective
+from ._results import build_result
+from ._statistics import bound_contacts
+from ._status import CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
-__all__ = ["SolverOptions", "METHODS", "compiled_fit", "result_name", "result_message",
-           "multistart_points", "fit"]
+__all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
+           "RoundoffTrustRegion", "compiled_fit", "result_message", "multistart_points", "starting_point",
+           "finish_on_bounds", "fit"]
 
 METHODS = ("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb", "trf")
 #: Methods run on the host (scipy), one fit at a time.
 HOST_METHODS = ("trf",)
-_LBFGSB_CODES = {"successful": 0, "max_steps": 7, "nonfinite": 9}  # optimistix RESULTS indices
-
+#: Unconstrained methods (transformed coordinates) that a bound can stall.
+_TRANSFORMED = ("lm", "gauss-newton", "dogleg", "bfgs")
 
 @dataclasses.dataclass(frozen=True)
 class SolverOptions:
@@ -62,16 +74,35 @@ class SolverOptions:
     def __post_init__(self):
         if self.method not in METHODS:
             raise LayerstackError(f"method must be one of {METHODS}, got {self.method!r}")
-        if not (self.max_steps >= 1):
-            raise LayerstackError(f"max_steps must be >= 1, got {self.max_steps}")
+        if not (isinstance(self.max_steps, (int, np.integer)) and self.max_steps >= 1):
+            raise LayerstackError(f"max_steps must be an integer >= 1, got {self.max_steps!r}")
         for name in ("rtol", "atol", "gtol"):
             if not getattr(self, name) > 0:
                 raise LayerstackError(f"{name} must be > 0, got {getattr(self, name)}")
 
 
-class RoundoffTrustRegion(optx.ClassicalTrustRegion):
-    """:class:`optimistix.ClassicalTrustRegion` that also accepts a step when both its predicted
-    and its actual change of the cost are at the round-off level of the cost (≤ 1000 ε |f|).
+class FitOutput(NamedTuple):
+    """What the compiled fit returns (leading axes: one per fit in batched calls).
+
+    ``x``: physical solution ``(P,)``; ``num_steps``; ``status`` (:data:`STATUS`); ``model``:
+    model values per dataset ``(samples, wl)``; ``residuals``: weighted data residuals per
+    dataset; ``penalty``: penalty residuals; ``jacobian``: ``(M, P)`` of the full residual vector
+    w.r.t. ``x / scale``."""
+
+    x: object
+    num_steps: object
+    status: object
+    model: tuple
+    residuals: tuple
+    penalty: object
+    jacobian: object
+
+
+# --------------------------------------------------------------------------- Levenberg–Marquardt
+class RoundoffTrustRegion(optx.AbstractSearch):
+    """:class:`optimistix.ClassicalTrustRegion` (``region``) that also accepts a step when both
+    its predicted and its actual change of the cost are at the round-off level of the cost
+    (≤ 1000 ε |f|).
 
     There the ratio actual/predicted is noise: the classical rule rejects such steps at random
     and shrinks the region again and again, so a fit that has already converged spends many
@@ -79,25 +110,39 @@ class RoundoffTrustRegion(optx.ClassicalTrustRegion):
     on benchmark F1. Accepting them leaves the damping unchanged and lets the Cauchy test end the
     solve as soon as the steps are small."""
 
+    region: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion()
+
+    def init(self, y, f_info_struct):
+        return self.region.init(y, f_info_struct)
+
     def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
-        step_size, accept, result, new_state = super().step(first_step, y, y_eval, f_info, f_eval_info, state)
+        step_size, accept, result, new_state = self.region.step(first_step, y, y_eval, f_info, f_eval_info, state)
         f = f_info.as_min()
         noise = 1e3 * jnp.finfo(jnp.result_type(f)).eps * jnp.abs(f)
         y_diff = jax.tree.map(lambda a, b: a - b, y_eval, y)
-        predicted = self.predict_reduction(y_diff, f_info)
+        predicted = self.region.predict_reduction(y_diff, f_info)
         flat = (jnp.abs(predicted) <= noise) & (jnp.abs(f_eval_info.as_min() - f) <= noise)
         keep = flat & ~accept
         step_size = jnp.where(keep, state.step_size, step_size)
-        new_state = type(new_state)(step_size=step_size)
+        new_state = jax.tree.map(lambda a, b: jnp.where(keep, a, b), state, new_state)
         return step_size, accept | flat, result, new_state
 
 
-class LevenbergMarquardt(optx.LevenbergMarquardt):
-    """:class:`optimistix.LevenbergMarquardt` with the :class:`RoundoffTrustRegion` update."""
+def _quiet(**kwargs) -> None:
+    """No progress output from inside the compiled solve."""
 
-    def __init__(self, rtol: float, atol: float, **kwargs):
-        super().__init__(rtol, atol, **kwargs)
-        self.search = RoundoffTrustRegion()
+
+class LevenbergMarquardt(optx.AbstractGaussNewton):
+    """Levenberg–Marquardt composed from optimistix parts, as optimistix documents for custom
+    solvers: Gauss–Newton steps damped by :class:`optimistix.DampedNewtonDescent` (QR of the
+    damped system) within the :class:`RoundoffTrustRegion` update."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    descent: optx.AbstractDescent = optx.DampedNewtonDescent(linear_solver=lx.QR())
+    search: optx.AbstractSearch = RoundoffTrustRegion()
+    verbose: Callable = _quiet
 
 
 def _optx_solver(o: SolverOptions):
@@ -110,21 +155,15 @@ def _optx_solver(o: SolverOptions):
     return optx.BFGS(rtol=o.rtol, atol=o.atol)
 
 
-def result_name(code: int) -> str:
-    for name, item in optx.RESULTS._name_to_item.items():
-        if int(item._value) == int(code):
-            return name
-    return f"code {code}"
+def _status(result, x):
+    """The library's status (traced int) of an optimistix ``result`` at solution ``x``."""
+    code = jnp.where(result == optx.RESULTS.successful, CONVERGED,
+                     jnp.where(result == optx.RESULTS.nonlinear_max_steps_reached, MAX_STEPS,
+                               jnp.where(result == optx.RESULTS.nonfinite, NONFINITE, FAILED)))
+    return jnp.where(jnp.all(jnp.isfinite(x)), code, NONFINITE)
 
 
-def result_message(code: int) -> str:
-    name = result_name(code)
-    if name == "successful":
-        return "converged"
-    msg = optx.RESULTS._index_to_message[int(code)].split("\n")[0].strip()
-    return f"{name}: {msg}" if msg else name
-
-
+# --------------------------------------------------------------------------- compiled solves
 def _cache(objective: Objective) -> dict:
     c = objective.__dict__.get("_compiled")
     if c is None:
@@ -133,30 +172,25 @@ def _cache(objective: Objective) -> dict:
 
 
 def _solve_function(objective: Objective, o: SolverOptions):
-    """Pure ``(start, args, optics) -> (x, steps, code)``; ``start`` is ``u`` (optimistix) or ``z``
-    (L-BFGS-B); ``optics`` the objective's fixed optics (or None)."""
+    """Pure ``(start, args, optics) -> (x, steps, status)``; ``start`` is ``u`` (optimistix) or
+    ``z`` (L-BFGS-B); ``optics`` the objective's fixed optics (or None)."""
     layout = objective.layout
     if o.method == "lbfgsb":
-        import jaxopt
-
         scale = jnp.asarray(layout.scale)
         lower = jnp.asarray(layout.lower / layout.scale)
         upper = jnp.asarray(layout.upper / layout.scale)
 
-        def cost(z, args_optics):
-            r = objective.residuals(z * scale, *args_optics)
+        def cost(z, args, optics):
+            r = objective.residuals(z * scale, args, optics)
             return 0.5 * jnp.sum(r * r)
 
-        solver = jaxopt.LBFGSB(fun=cost, maxiter=o.max_steps, tol=o.gtol, jit=True)
+        run = compiled_lbfgsb(cost, o.max_steps, o.gtol)
 
         def solve(z0, args, optics):
-            out = solver.run(z0, bounds=(lower, upper), args_optics=(args, optics))
-            z, state = out.params, out.state
-            finite = jnp.all(jnp.isfinite(z)) & jnp.isfinite(state.value)
-            ok = state.error <= o.gtol
-            code = jnp.where(~finite, _LBFGSB_CODES["nonfinite"],
-                             jnp.where(ok, _LBFGSB_CODES["successful"], _LBFGSB_CODES["max_steps"]))
-            return z * scale, state.iter_num, code
+            sol = run(z0, lower, upper, args, optics)
+            finite = jnp.all(jnp.isfinite(sol.x)) & jnp.isfinite(sol.value)
+            status = jnp.where(~finite, NONFINITE, jnp.where(sol.converged, CONVERGED, MAX_STEPS))
+            return sol.x * scale, sol.num_steps, status
 
         return solve
 
@@ -178,9 +212,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
         else:
             sol = optx.least_squares(fn, solver, u0, args=(args, optics), max_steps=o.max_steps, throw=False)
         x = layout.to_physical(sol.value)
-        code = sol.result._value
-        code = jnp.where(jnp.all(jnp.isfinite(x)), code, _LBFGSB_CODES["nonfinite"])
-        return x, sol.stats["num_steps"], code
+        return x, sol.stats["num_steps"], _status(sol.result, x)
 
     return solve
 
@@ -201,6 +233,7 @@ def dense_jacobian(fn):
     def g_jvp(primals, tangents):
         u, args = primals
         du, dargs = tangents
+
         def value_twice(v):  # the Jacobian's function and, as aux, its value: one pass
             r = fn(v, args)
             return r, r
@@ -254,10 +287,10 @@ BLOCK = 4
 
 
 def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: int = BLOCK):
-    """The jitted ``(start, args, optics) -> (x, steps, code, model, residuals, penalty, J)`` of
-    ``objective`` for options ``o`` — solve, then the statistics at the solution, in one
-    compiled function. When ``batched``, start and args carry a leading axis of fits, solved
-    ``block`` at a time (vmapped) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
+    """The jitted ``(start, args, optics) -> FitOutput`` of ``objective`` for options ``o`` —
+    solve, then the statistics' ingredients at the solution, in one compiled function. When
+    ``batched``, start and args carry a leading axis of fits, solved ``block`` at a time
+    (vmapped) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
     :attr:`Objective.optics`) is shared. Compiled once per objective, options and batching;
     cached on the objective."""
     key = ("fit", o, batched, block if batched else None)
@@ -269,8 +302,8 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
         stats = _statistics_function(objective)
 
         def run(start, args, optics):
-            x, steps, code = solve(start, args, optics)
-            return (x, steps, code) + tuple(stats(x, args, optics))
+            x, steps, status = solve(start, args, optics)
+            return FitOutput(x, steps, status, *stats(x, args, optics))
 
         if batched:
             def run_all(starts, args, optics):
@@ -326,11 +359,11 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         z = np.where(near_lo, lower, np.where(near_hi, upper, z))
         x = z * layout.scale
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(sol.fun))):
-            code = _LBFGSB_CODES["nonfinite"]
-        else:
-            code = _LBFGSB_CODES["successful"] if sol.status > 0 else _LBFGSB_CODES["max_steps"]
+            status = NONFINITE
+        else:  # scipy: status > 0 — one of its tolerances met; 0 — max_nfev; -1 — failure
+            status = CONVERGED if sol.status > 0 else MAX_STEPS if sol.status == 0 else FAILED
         x = jnp.asarray(x)
-        return (x, jnp.asarray(sol.nfev), jnp.asarray(code)) + tuple(stats(x, args, optics))
+        return FitOutput(x, jnp.asarray(sol.nfev), jnp.asarray(status), *stats(x, args, optics))
 
     if not batched:
         return one
@@ -340,6 +373,41 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         return jax.tree.map(lambda *a: jnp.stack(a), *outs)
 
     return run_all
+
+
+def finish_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, args) -> tuple[FitOutput, np.ndarray]:
+    """Fits of an unconstrained method that ended unconverged (step limit, or a failed step)
+    with a parameter on a bound (the transforms only approach it), finished by the bounded
+    L-BFGS-B from where they stopped, the parameters in contact put on their bound.
+
+    ``out``: NumPy :class:`FitOutput` with a leading axis of fits, ``args`` the same fits'
+    data. Returns the updated output (steps of both solves added) and the ``(N,)`` mask of the
+    fits finished so; fits of other methods, and other fits, are returned unchanged."""
+    x, status = np.asarray(out.x), np.asarray(out.status)
+    n = x.shape[0]
+    if o.method not in _TRANSFORMED:
+        return out, np.zeros(n, bool)
+    layout = objective.layout
+    lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale)
+    finite = np.all(np.isfinite(x), axis=-1)
+    stalled = (status != CONVERGED) & finite & (lo | hi).any(axis=-1)
+    if not stalled.any():
+        return out, stalled
+    idx = np.nonzero(stalled)[0]
+    ob = dataclasses.replace(o, method="lbfgsb")
+    # start on the bound itself: L-BFGS-B then checks the bound's optimality (projected gradient)
+    x0 = np.where(lo, layout.lower, np.where(hi, layout.upper, np.clip(x, layout.lower, layout.upper)))
+    z0 = x0[idx] / layout.scale
+    sub = jax.tree.map(lambda a: jnp.asarray(a)[idx], args)
+    new = jax.tree.map(np.asarray, compiled_fit(objective, ob, batched=True)(jnp.asarray(z0), sub, objective.optics))
+    new = new._replace(num_steps=np.asarray(out.num_steps)[idx] + new.num_steps)
+
+    def put(a, b):
+        a = np.array(a, copy=True)
+        a[idx] = b
+        return a
+
+    return jax.tree.map(put, out, new), stalled
 
 
 def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarray:
@@ -366,6 +434,14 @@ def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarra
     return pts
 
 
+def bound_note(method: str, names: list, switched: bool) -> str:
+    """The result's note when a fit of ``method`` was finished by L-BFGS-B."""
+    if not switched:
+        return ""
+    return (f"{method} did not converge with {', '.join(names)} on a bound (its transformed coordinates "
+            "only approach a bound); finished by the bounded L-BFGS-B from there, bounds kept exactly")
+
+
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
         max_steps: int = 256, rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9,
         scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8):
@@ -376,6 +452,8 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         method: ``"lm"`` (default), ``"gauss-newton"``, ``"dogleg"``, ``"bfgs"``, ``"lbfgsb"``
             (bounds kept exactly; for optima on a bound) or ``"trf"`` (scipy's bounded
             trust-region least squares on the host; bounds kept exactly; large joint fits).
+            An unconstrained method that stalls on a bound is finished by L-BFGS-B (the
+            result's ``note`` says so).
         data: optional replacement spectra (one ``(samples, wl)`` array per dataset): fits
             other data with the same compiled solver.
         x0: optional physical starting vector ``(P,)`` (default: from the parameters / stack).
@@ -383,8 +461,8 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             :func:`multistart_points`), solved in one vmapped call; the converged one with the
             lowest χ² wins.
         max_steps, rtol, atol, gtol: stopping rules (:class:`SolverOptions`).
-        scale_covariance: scale the covariance by the reduced χ²; default: True unless every
-            dataset gives σ.
+        scale_covariance: scale the covariance by the reduced χ² (σ estimated from the
+            residuals); default: True unless every dataset gives σ.
         rank_rtol: singular values of the normalised Jacobian below ``rank_rtol`` × the largest
             mark a non-identifiable combination.
 
@@ -392,8 +470,6 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
     for α, dimensionless for n and ρg).
     """
-    from ._results import build_result
-
     o = SolverOptions(method, rtol, atol, gtol, max_steps)
     if objective.n_parameters == 0:
         raise LayerstackError("the objective has no free parameter")
@@ -403,24 +479,26 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     x_start = objective.layout.x0 if x0 is None else np.asarray(x0, float)
     if x_start.shape != (objective.n_parameters,):
         raise LayerstackError(f"x0 must have {objective.n_parameters} values, got shape {x_start.shape}")
+    pts = multistart_points(objective, starts, seed)
+    pts[0] = x_start
+    y0 = jnp.asarray(starting_point(objective, o, pts))
+    bargs = jax.tree.map(lambda a: jnp.broadcast_to(a, (starts,) + a.shape), args)
     if starts == 1:
-        y0 = jnp.asarray(starting_point(objective, o, x_start))
-        out = compiled_fit(objective, o, batched=False)(y0, args, objective.optics)
-        n_starts_converged = None
+        one = compiled_fit(objective, o, batched=False)(y0[0], args, objective.optics)
+        outs = jax.tree.map(lambda a: np.asarray(a)[None], one)
     else:
-        pts = multistart_points(objective, starts, seed)
-        pts[0] = x_start
-        y0 = jnp.asarray(starting_point(objective, o, pts))
-        bargs = jax.tree.map(lambda a: jnp.broadcast_to(a, (starts,) + a.shape), args)
-        outs = compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics)
-        codes = np.asarray(outs[2])
-        cost = np.asarray(sum(jnp.sum(r**2, axis=(-2, -1)) for r in outs[4]) + jnp.sum(outs[5] ** 2, axis=-1))
-        ok = (codes == 0) & np.isfinite(cost)
+        outs = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics))
+    outs, switched = finish_on_bounds(objective, o, outs, bargs)
+    n_starts_converged = None
+    best = 0
+    if starts > 1:
+        cost = sum(np.sum(r ** 2, axis=(-2, -1)) for r in outs.residuals) + np.sum(outs.penalty ** 2, axis=-1)
+        ok = (outs.status == CONVERGED) & np.isfinite(cost)
         n_starts_converged = int(ok.sum())
-        best = int(np.argmin(np.where(ok, cost, np.inf))) if ok.any() else int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))
-        out = jax.tree.map(lambda a: a[best], outs)
-    x, steps, code, model, res, pen, J = out
-    return build_result(objective, o, np.asarray(x), int(steps), int(code), [np.asarray(m) for m in model],
-                        [np.asarray(r) for r in res], np.asarray(pen), np.asarray(J), args,
-                        scale_covariance=scale_covariance, rank_rtol=rank_rtol, starts=starts,
-                        starts_converged=n_starts_converged)
+        best = int(np.argmin(np.where(ok if ok.any() else np.isfinite(cost), cost, np.inf)))
+    out = jax.tree.map(lambda a: a[best], outs)
+    lo, hi = bound_contacts(out.x, objective.layout.lower, objective.layout.upper, objective.layout.scale)
+    names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
+    return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
+                        starts=starts, starts_converged=n_starts_converged,
+                        note=bound_note(method, names, bool(switched[best])))

@@ -68,7 +68,7 @@ def test_exact_recovery_thickness_and_alpha_basis_sphere(incoherent):
     np.testing.assert_allclose(r.spectra["alpha[ink]"], ALPHA_BASIS @ ALPHA_TRUE, rtol=1e-6)
     assert r.chi2 < 1e-12 and r.identifiable and not r.covariance_scaled
     text = r.report()
-    assert "converged         yes" in text and "from the given sigma" in text
+    assert "converged         yes" in text and "sigma             given" in text and "consistent with the noise" not in text
 
 
 def test_uncertainty_calibration_100_replicates_one_batch(incoherent):
@@ -269,7 +269,7 @@ def test_mixed_coherent_incoherent_45_0():
     assert r.converged, r.reason
     assert r.values["thickness[film]"] == pytest.approx(300.0, rel=1e-6)
     assert r.values["thickness[varnish]"] == pytest.approx(20_000.0, rel=1e-6)
-    assert r.covariance_scaled and "scaled by the reduced chi2" in r.report()
+    assert r.covariance_scaled and r.sigma_origin == "estimated from residuals" and "estimated from residuals" in r.report()
 
 
 # ---------------------------------------------------------- bounds, identifiability
@@ -373,9 +373,14 @@ def test_bad_data_nan_negative_and_range():
     bad[5] = np.nan
     with pytest.raises(ls.LayerstackError, match=r"NaN .* sample 0, 437.5 nm"):
         _data_objective(data=bad)
-    bad[5] = -0.01
-    with pytest.raises(ls.LayerstackError, match="negative reflectance"):
+    bad[5] = -0.05  # below the noise floor around a dark reading (issue 18, row 7)
+    with pytest.raises(ls.LayerstackError, match="below -0.01 without sigma"):
         _data_objective(data=bad)
+    bad[5] = -0.005  # noise around a dark, dark-corrected reading: valid data
+    _data_objective(data=bad)
+    with pytest.raises(ls.LayerstackError, match="below -5 sigma"):
+        _data_objective(data=bad, sigma=1e-4)
+    _data_objective(data=bad, sigma=2e-3)
     with pytest.raises(ls.LayerstackError, match=r"cover 415–700 nm .* never extrapolated"):
         _data_objective(data=y[2:], wavelength_nm=WL[2:])
     with pytest.raises(ls.LayerstackError, match="40 points per spectrum but the model grid has 41"):

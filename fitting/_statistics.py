@@ -1,0 +1,209 @@
+r"""Statistics of a least-squares fit, computed once for :func:`~fitting.fit`,
+:func:`~fitting.fit_batch` and :func:`~fitting.calibration_series` fits: χ², degrees of freedom,
+linearised covariance, standard errors, correlations, identifiability, parameters on a bound,
+and a plain verdict on the fit quality.
+
+Every function takes arrays with optional leading batch axes (one per fit), so one batch of N
+fits and N single fits give the same numbers.
+
+Covariance (linearised least squares, e.g. Press et al., *Numerical Recipes* §15.4–15.6): with
+:math:`J` the Jacobian of the weighted residuals :math:`r_i = (f_i - y_i)/\sigma_i` at the
+solution, :math:`C = s^2 (J^\top J)^{+}`; :math:`s^2 = 1` when every dataset gives σ ("given"),
+:math:`s^2 = \chi^2/\nu` (ν = N − P) when the σ of the data are estimated from the residuals.
+
+Identifiability: the SVD of :math:`J` taken with respect to :math:`\ln x` (relative changes;
+:math:`x/s` for a parameter at 0), columns normalised to unit length. A singular value below
+``rank_rtol`` × the largest marks a direction along which the data do not change; the
+components on it are *unresolved*: their standard errors are NaN (not arbitrary huge numbers)
+and the pseudo-inverse is taken on the resolved subspace. Along such a direction ``v`` the
+correlation of two components tends to :math:`\operatorname{sign}(v_i v_j) = \pm 1` as its
+singular value tends to 0; that limit is what :attr:`FitStatistics.correlation` holds for them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "FitStatistics",
+    "fit_statistics",
+    "linearised_covariance",
+    "unresolved_components",
+    "bound_contacts",
+    "strong_correlations",
+    "SIGMA_GIVEN",
+    "SIGMA_ESTIMATED",
+    "SIGMA_DEFAULT",
+    "CORRELATION_LIMIT",
+]
+
+#: σ origins, as reports write them.
+SIGMA_GIVEN = "given"
+SIGMA_ESTIMATED = "estimated from residuals"
+SIGMA_DEFAULT = "default 1 — χ² not meaningful"
+#: |correlation| above which two parameters are reported as not separated by the data.
+CORRELATION_LIMIT = 0.99
+#: components of a null vector (unit length) larger than this take part in it.
+_NULL_COMPONENT = 0.05
+
+
+class FitStatistics(NamedTuple):
+    """Statistics of one fit or a batch of fits (leading axes ``...``; P parameters).
+
+    ``chi2`` (data residuals only, not penalties), ``dof`` = n_points − P, ``reduced_chi2``
+    (NaN when dof ≤ 0); ``covariance`` ``(..., P, P)`` in the parameters' units, already scaled
+    by ``s²`` (``s2``: 1 for given σ, else χ²/dof); ``stderr`` ``(..., P)`` (NaN where
+    ``unresolved``); ``correlation`` ``(..., P, P)`` (±1 limits for unresolved pairs on one null
+    direction, NaN where undefined); ``singular_values`` ``(..., P)`` of the normalised Jacobian
+    (descending), ``rank``; ``null_vectors`` rows of :math:`V^\\top` (normalised coordinates),
+    ``log_directions`` the same as :math:`\\delta\\ln x` scaled to max 1; ``zero_columns``:
+    components the data do not depend on; ``sigma_origin``: one of :data:`SIGMA_GIVEN`,
+    :data:`SIGMA_ESTIMATED`, :data:`SIGMA_DEFAULT` (the σ behind ``stderr``), ``chi2_meaningful``.
+    """
+
+    chi2: np.ndarray
+    n_points: int
+    dof: int
+    reduced_chi2: np.ndarray
+    s2: np.ndarray
+    covariance: np.ndarray
+    stderr: np.ndarray
+    correlation: np.ndarray
+    singular_values: np.ndarray
+    rank: np.ndarray
+    null_vectors: np.ndarray
+    log_directions: np.ndarray
+    unresolved: np.ndarray
+    zero_columns: np.ndarray
+    sigma_origin: str
+    chi2_meaningful: bool
+
+
+def linearised_covariance(J, x, scale, rank_rtol: float):
+    """Covariance of ``x`` for unit residual variance, from ``J = ∂r/∂(x/scale)``
+    ``(..., M, P)``, and the SVD of the normalised Jacobian.
+
+    Returns ``(cov, singular_values, rank, null_vectors, log_directions)``; ``null_vectors``
+    ``(..., P, P)`` are the rows of :math:`V^\\top` in normalised coordinates (those beyond
+    ``rank`` span the null space), ``log_directions`` the same as :math:`\\delta\\ln x`
+    (:math:`\\delta x/s` for x = 0), each scaled to max 1. A fit with a non-finite Jacobian has
+    NaN covariance and singular values and makes no rank claim (rank P).
+    """
+    J = np.asarray(J, float)
+    x = np.asarray(x, float)
+    scale = np.asarray(scale, float)
+    rel = np.where(x != 0, np.abs(x) / scale, 1.0)  # d/d ln x = (|x|/s) d/d(x/s)
+    Jr = J * rel[..., None, :]
+    norms = np.linalg.norm(Jr, axis=-2)
+    safe = np.where(norms > 0, norms, 1.0)
+    Jn = Jr / safe[..., None, :]
+    bad = ~np.all(np.isfinite(Jn), axis=(-2, -1))
+    Jn = np.where(bad[..., None, None], 0.0, Jn)
+    _, sv, Vt = np.linalg.svd(Jn, full_matrices=False)
+    top = sv[..., :1]
+    keep = (sv > rank_rtol * top) & (top > 0)
+    rank = np.where(bad, J.shape[-1], keep.sum(axis=-1))
+    sv = np.where(bad[..., None], np.nan, sv)
+    inv = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
+    cov_n = np.einsum("...ki,...k,...kj->...ij", Vt, inv, Vt)
+    a = rel / safe  # J = Jn diag(1/a)
+    cov = cov_n * (a * scale)[..., :, None] * (a * scale)[..., None, :]
+    cov = np.where(bad[..., None, None], np.nan, cov)
+    dirs = Vt / safe[..., None, :]
+    dirs = dirs / np.maximum(np.max(np.abs(dirs), axis=-1, keepdims=True), 1e-300)
+    return cov, sv, rank, Vt, dirs
+
+
+def unresolved_components(null_vectors, log_directions, rank, zero_columns, owner):
+    """``(..., P)`` True for the components the data do not determine: columns of zero
+    Jacobian, and components taking part in a null direction (rows ``>= rank`` of
+    ``null_vectors``). A parameter (components sharing ``owner``) whose every free component
+    moves along a null direction by the same relative amount as its strong ones is unresolved
+    as a whole (α(λ) of a layer whose α·h alone is determined, also where it barely absorbs)."""
+    Vt = np.asarray(null_vectors)
+    P = Vt.shape[-1]
+    owner = np.asarray(owner)
+    rows = np.arange(P)
+    null = rows >= np.asarray(rank)[..., None]  # (..., P) rows that are null
+    comp = (np.abs(Vt) > _NULL_COMPONENT) & ~zero_columns[..., None, :] & null[..., :, None]  # (..., row, P)
+    out = np.asarray(zero_columns, bool) | comp.any(axis=-2)
+    for i in np.unique(owner):
+        mine = owner == i
+        in_row = comp & mine  # (..., row, P)
+        has = in_row.any(axis=-1)  # (..., row)
+        first = np.argmax(in_row, axis=-1)  # first strong component of parameter i per row
+        w_first = np.take_along_axis(log_directions, first[..., None], axis=-1)  # (..., row, 1)
+        every = mine & ~zero_columns[..., None, :]
+        close = np.abs(log_directions - w_first) <= 0.02 + 0.05 * np.abs(w_first)
+        whole = has & np.all(close | ~every, axis=-1)  # (..., row)
+        out = out | np.any(whole[..., None] & every, axis=-2)
+    return out
+
+
+def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: bool, scale_covariance=None,
+                   rank_rtol: float = 1e-8) -> FitStatistics:
+    """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``)
+    at solutions ``x`` ``(..., P)``; ``data_residuals``: the weighted data residuals, one array
+    ``(..., samples, wl)`` per dataset (0 at masked points); ``n_points`` the used data points.
+
+    ``scale_covariance``: scale by χ²/dof (σ estimated from residuals); default: unless every
+    dataset gives σ. Components with a zero Jacobian column or on a null direction (singular
+    value < ``rank_rtol`` × the largest) get NaN standard errors."""
+    J = np.asarray(J, float)
+    x = np.asarray(x, float)
+    lead = x.shape[:-1]
+    P = x.shape[-1]
+    chi2 = sum(np.sum(np.asarray(r, float) ** 2, axis=(-2, -1)) for r in data_residuals)
+    chi2 = np.broadcast_to(chi2, lead).astype(float)
+    dof = int(n_points) - P
+    red = chi2 / dof if dof > 0 else np.full(lead, np.nan)
+    scaled = (not sigma_given) if scale_covariance is None else bool(scale_covariance)
+    cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
+    zero = np.linalg.norm(J, axis=-2) == 0
+    unresolved = unresolved_components(Vt, dirs, rank, zero, layout.owner)
+    s2 = red if scaled else np.ones(lead)
+    cov = cov * np.asarray(s2)[..., None, None]
+    var = np.diagonal(cov, axis1=-2, axis2=-1)
+    err = np.where(unresolved, np.nan, np.sqrt(np.clip(var, 0, None)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.sqrt(np.clip(var, 0, None))
+        corr = cov / (d[..., :, None] * d[..., None, :])
+    corr = np.where(unresolved[..., :, None] | unresolved[..., None, :], np.nan, corr)
+    # unresolved pairs on one null direction: the limit sign(v_i v_j) of their correlation
+    null = np.arange(P) >= np.asarray(rank)[..., None]
+    strong = (np.abs(Vt) > _NULL_COMPONENT) & null[..., :, None] & ~zero[..., None, :]
+    both = strong[..., :, :, None] & strong[..., :, None, :]  # (..., row, P, P)
+    limit = np.sign(Vt[..., :, :, None] * Vt[..., :, None, :])
+    on_null = both.any(axis=-3)
+    lim = np.sum(np.where(both, limit, 0.0), axis=-3)
+    corr = np.where(on_null, np.clip(lim, -1, 1), corr)
+    eye = np.eye(P, dtype=bool)
+    corr = np.where(eye & ~np.isnan(np.diagonal(cov, axis1=-2, axis2=-1))[..., None], 1.0, corr)
+    origin = SIGMA_ESTIMATED if scaled else (SIGMA_GIVEN if sigma_given else SIGMA_DEFAULT)
+    return FitStatistics(chi2, int(n_points), dof, red, np.asarray(s2, float), cov, err, corr, sv, rank, Vt, dirs,
+                         unresolved, zero, origin, bool(sigma_given))
+
+
+def bound_contacts(x, lower, upper, scale, rtol: float = 1e-6):
+    """``(at_lower, at_upper)``, each ``(..., P)`` bool: components within ``rtol`` × scale of
+    a finite bound (L-BFGS-B and TRF end exactly on a bound; the transforms of the
+    unconstrained solvers approach it exponentially)."""
+    x = np.asarray(x, float)
+    tol = rtol * np.asarray(scale, float)
+    with np.errstate(invalid="ignore"):
+        lo = np.isfinite(lower) & (x - lower <= tol)
+        hi = np.isfinite(upper) & (upper - x <= tol)
+    return lo, hi & ~lo
+
+
+def strong_correlations(correlation, limit: float = CORRELATION_LIMIT) -> list:
+    """``[(i, j, ρ)]`` of one fit's ``(P, P)`` correlation with ``|ρ| > limit`` (i > j), the
+    strongest first."""
+    c = np.asarray(correlation, float)
+    i, j = np.tril_indices(c.shape[-1], -1)
+    rho = c[i, j]
+    pick = np.isfinite(rho) & (np.abs(rho) > limit)
+    order = np.argsort(-np.abs(rho[pick]), kind="stable")
+    return [(int(a), int(b), float(r)) for a, b, r in zip(i[pick][order], j[pick][order], rho[pick][order])]

@@ -30,12 +30,14 @@ Models (with the parameter names of pyElli, which the tests compare against):
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ._materials import Material
-from ._validate import LayerstackError, check_finite, check_nonnegative, is_concrete
+from ._validate import LayerstackError, LayerstackWarning, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["HC_EV_NM", "photon_energy", "Lorentz", "Drude", "TaucLorentz", "CodyLorentz", "CauchyUrbach"]
 
@@ -212,6 +214,9 @@ class TaucLorentz(Material):
             C, E0 = np.asarray(self.C), np.asarray(self.E0)
             if np.any(C <= 0) or np.any(C >= 2 * E0):
                 raise LayerstackError("TaucLorentz.C (broadening) must satisfy 0 < C < 2 E0")
+        if is_concrete((self.E0, self.Eg)) and np.any(np.asarray(self.E0) <= np.asarray(self.Eg)):
+            warnings.warn("TaucLorentz.E0 (peak) at or below Eg (band gap): implausible "
+                          "(Jellison & Modine assume E0 > Eg)", LayerstackWarning, stacklevel=3)
 
     def permittivity(self, wavelength_nm):
         """Complex ε on the grid (nm) ``(wl,)``."""
@@ -287,6 +292,9 @@ class CodyLorentz(Material):
             check_nonnegative(f"CodyLorentz.{f}", getattr(self, f))
         if is_concrete(self.Eu) and np.any(np.asarray(self.Eu) <= 0):
             raise LayerstackError("CodyLorentz.Eu (Urbach energy) must be > 0")
+        if is_concrete((self.Et, self.Eg)) and np.any(np.asarray(self.Et) < np.asarray(self.Eg)):
+            warnings.warn("CodyLorentz.Et (start of the Urbach tail) below Eg (band gap): implausible "
+                          "(Ferlauto et al. take Et >= Eg)", LayerstackWarning, stacklevel=3)
 
     def _eps2(self, E):
         return cody_lorentz_eps2(E, self.Eg, self.A, self.E0, self.gamma, self.Ep, self.Et, self.Eu)

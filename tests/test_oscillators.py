@@ -248,3 +248,7 @@ def test_bad_parameters_raise():
         CauchyUrbach(A=1.5, k0=-0.1)
     with pytest.raises(ls.LayerstackError, match="Drude.gamma"):
         Drude(Ep=9.0, gamma=-1.0)
+    with pytest.warns(ls.LayerstackWarning, match="TaucLorentz.E0"):
+        TaucLorentz(Eg=3.0, A=10.0, E0=2.5, C=1.0)
+    with pytest.warns(ls.LayerstackWarning, match="CodyLorentz.Et"):
+        CodyLorentz(Eg=1.6, A=60.0, E0=3.6, gamma=2.4, Ep=0.8, Et=1.0, Eu=0.05)

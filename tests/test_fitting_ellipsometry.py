@@ -81,3 +81,32 @@ def test_measured_woollam_psi_delta_fit_inside_bounds():
     e = ls.ellipsometry(ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.452, 0.0036), d)], start.exit), wl, 70.0)
     res = np.concatenate([np.asarray(e.psi_deg) - psi_m, np.asarray(e.delta_deg) - delta_m])
     assert np.sqrt(np.mean(res**2)) <= 1.0
+
+
+@pytest.mark.slow  # ~1-2 min on a shared 2-core machine (compiling the Jacobian of a 2-layer VASE model)
+def test_oscillator_and_roughness_parameters_are_fittable():
+    """Tauc–Lorentz film under a rough (Bruggeman, void + dense top material) layer on silicon:
+    VASE (N, C, S at 60° and 70°) recovers thickness, band gap, amplitude of the film and the
+    void fraction of the rough layer from a start 10–20 % off: the fitting objective reaches
+    the leaves of the new materials."""
+    from layerstack_jax._effective_medium import Bruggeman
+    from layerstack_jax._oscillators import TaucLorentz
+
+    def stack(d, Eg, A, void):
+        tl = TaucLorentz(Eg=Eg, A=A, E0=4.5, C=1.5, eps_inf=1.8)
+        rough = ls.Layer(Bruggeman([1.0, ls.Index(2.2, 0.05)], void), 4.0, name="rough")
+        return ls.Stack(1.0, [rough, ls.Layer(tl, d, name="film")], ls.Substrate(3.9 + 0.02j))
+
+    wl = np.linspace(250.0, 900.0, 14)
+    truth = dict(d=48.0, Eg=3.1, A=150.0, void=0.5)
+    geometries = [ls.Ellipsometric(a, q) for a in (60.0, 70.0) for q in ("N", "C", "S")]
+    data = [np.asarray(g.measure(stack(**truth), jnp.asarray(wl))) for g in geometries]
+    params = [ft.thickness("film", lower=0.0, upper=200.0),
+              ft.dispersion("film", "Eg", lower=1.0, upper=4.0),
+              ft.dispersion("film", "A", lower=10.0, upper=400.0),
+              ft.dispersion("rough", "fractions", lower=0.0, upper=1.0)]
+    datasets = [ft.Dataset(g, y, sigma=1e-3) for g, y in zip(geometries, data)]
+    result = ft.fit(ft.Objective(stack(d=55.0, Eg=2.8, A=130.0, void=0.4), wl, datasets, params))
+    assert result.converged, result.report()
+    values = np.array([float(np.squeeze(v)) for v in result.values.values()])
+    np.testing.assert_allclose(values, [truth["d"], truth["Eg"], truth["A"], truth["void"]], rtol=1e-5)

@@ -340,6 +340,8 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
         value = reflectance(stack, wl, geometry, nodes=nodes)
         value = jnp.broadcast_to(value, batch + value.shape)
         return np.array(value) if is_concrete((stack, wl, geometry)) else value
+    if any(_is_dask(leaf) for leaf in leaves):
+        return _predict_dask(leaves, treedef, lay, wl, geometry, nodes, int(chunk), int(step))
     if not is_concrete((stack, wl, geometry)):
         return _predict_traced(leaves, treedef, lay, wl, geometry, nodes, int(chunk))
     chunk = int(min(chunk, n))
@@ -377,6 +379,59 @@ def _output(out, batch: tuple, tail: tuple, dtype):
     if not np.shares_memory(flat, out):
         raise LayerstackError("predict: out must be C-contiguous")
     return out, flat
+
+
+def _is_dask(x) -> bool:
+    return type(x).__module__.startswith("dask.") and hasattr(x, "chunks")
+
+
+def _dask_block(*blocks, template, batched, core_ndim, wl, geometry, nodes, chunk, step, x64):
+    """One block of :func:`_predict_dask`: the numpy path of :func:`predict` on the block's stacks
+    (runs on a Dask worker: compiles once per worker process and structure, then reuses).
+    ``template``: one stack of the batch (a pytree definition does not survive pickling)."""
+    if bool(jax.config.jax_enable_x64) != x64:  # a fresh worker process: the caller's precision
+        jax.config.update("jax_enable_x64", x64)
+    shared, treedef = jax.tree_util.tree_flatten(template)
+    it = iter(blocks)
+    leaves = [np.asarray(next(it)) if b else s for s, b in zip(shared, batched)]
+    batch = np.broadcast_shapes(*[leaf.shape[:leaf.ndim - k] for leaf, k, b in zip(leaves, core_ndim, batched) if b])
+    stack = jax.tree_util.tree_unflatten(treedef, leaves)
+    return predict(stack, wl, geometry, batch_shape=tuple(batch), chunk=chunk, step=step, progress=False,
+                   nodes=nodes)
+
+
+def _predict_dask(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int, step: int):
+    """:func:`predict` with Dask arrays among the batched leaves: a lazy Dask array
+    ``(*batch, *angle, wl)``, one task per block of the batch (chunked like the Dask leaves),
+    computed on whatever scheduler is active (threads, processes, a ``distributed.Client``)."""
+    import dask.array as da
+
+    batch = lay.batch_shape
+    nb = len(batch)
+    arrays = []
+    for leaf, core, b in zip(leaves, lay.cores, lay.batched):
+        if not b:
+            continue
+        a = leaf if _is_dask(leaf) else da.from_array(np.asarray(leaf), chunks=-1)
+        arrays.append(da.broadcast_to(a, batch + core))
+    # one block structure for every batched leaf: the first Dask leaf's batch chunks, whole core axes
+    ref = next(a for a in arrays if a.numblocks[:nb] != (1,) * nb) if any(
+        a.numblocks[:nb] != (1,) * nb for a in arrays) else arrays[0]
+    batch_chunks = ref.chunks[:nb]
+    arrays = [a.rechunk(batch_chunks + tuple((c,) for c in a.shape[nb:])) for a in arrays]
+    first = tuple(np.asarray(a[(0,) * nb].compute()) for a in arrays)
+    it = iter(first)
+    one = jax.tree_util.tree_unflatten(treedef, [next(it) if b else s for s, b in zip(leaves, lay.batched)])
+    tail = jax.eval_shape(lambda st: reflectance(st, wl, geometry, nodes=nodes), one)
+    out_ind = tuple(f"b{i}" for i in range(nb)) + tuple(f"t{i}" for i in range(len(tail.shape)))
+    args = []
+    for k, a in enumerate(arrays):
+        args += [a, tuple(f"b{i}" for i in range(nb)) + tuple(f"c{k}_{j}" for j in range(a.ndim - nb))]
+    return da.blockwise(
+        _dask_block, out_ind, *args, new_axes={f"t{i}": n for i, n in enumerate(tail.shape)}, concatenate=True,
+        dtype=tail.dtype, meta=np.empty((0,) * len(out_ind), tail.dtype), template=one,
+        batched=lay.batched, core_ndim=tuple(len(c) for c in lay.cores), wl=np.asarray(wl), geometry=geometry,
+        nodes=nodes, chunk=chunk, step=step, x64=bool(jax.config.jax_enable_x64))
 
 
 def _predict_traced(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int):

@@ -212,3 +212,27 @@ def test_peak_memory_does_not_grow_with_n():
     # in chunks the peak grows by the output array only (+ allocator noise)
     growth = large["peak"] - small["peak"] - (large["out"] - small["out"])
     assert growth < 40 * 2**20, (small, large)
+
+
+def test_dask_leaves_give_a_lazy_dask_array_equal_to_the_numpy_path():
+    da = pytest.importorskip("dask.array")
+    import dask
+
+    hh = np.linspace(1e4, 3e4, 10)[:, None]
+    lazy = predict(_stack(h=da.from_array(hh, chunks=(4, 1)), alpha=ALPHA[:1]), WL, ls.Sphere(8.0), chunk=2)
+    assert isinstance(lazy, da.Array) and lazy.shape == (10, WL.size) and lazy.chunks[0] == (4, 4, 2)
+    with dask.config.set(scheduler="threads"):
+        got = lazy.compute()
+    np.testing.assert_array_equal(got, predict(_stack(h=hh, alpha=ALPHA[:1]), WL, ls.Sphere(8.0), chunk=2))
+
+
+@pytest.mark.slow
+def test_dask_prediction_on_a_local_cluster_of_two_processes():
+    da = pytest.importorskip("dask.array")
+    distributed = pytest.importorskip("distributed")
+    hh = np.linspace(1e4, 3e4, 10)[:, None]
+    lazy = predict(_stack(h=da.from_array(hh, chunks=(5, 1))), WL, ls.Sphere(8.0), chunk=2)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        got = client.compute(lazy).result()
+    np.testing.assert_array_equal(got, predict(_stack(h=hh), WL, ls.Sphere(8.0), chunk=2))

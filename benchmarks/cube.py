@@ -1,0 +1,131 @@
+"""fit_cube on a zarr cube on disk vs fit_batch on the same pixels in memory, standalone:
+
+    python -m benchmarks.cube [--size 100 100] [--chunk 25 25] [--client processes]
+
+The pixel model is benchmark F1's (``benchmarks/fitting_cases.py``): 3 incoherent layers over a
+Lambertian background, sphere 8° SCE, 401 λ; per pixel the top layer's thickness and 3 B-spline
+coefficients of the ink's α(λ) are fitted (4 parameters, Levenberg–Marquardt). The cube
+(``size`` pixels × 401 λ) is made by the forward model (:func:`layerstack_jax._batched.predict`)
+with Gaussian noise σ = 0.002, plus 1 % NaN pixels, and written to a zarr store (float32 on disk,
+as instruments deliver). Then, each compiled once beforehand on one solver chunk so that compile
+time is not counted:
+
+* ``fit_batch``: the valid pixels read into memory, one call;
+* ``fit_cube``: the same job out of core, region by region, maps written to zarr.
+
+Reported: both wall times and their ratio (target <= 1.3), pixels/s, the peak RSS of the
+process, agreement of the maps with fit_batch, and the machine's load. Writes
+``benchmarks/results/cube.json`` and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def _peak_rss() -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmHWM:"))
+
+
+def main(argv=None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--size", type=int, nargs=2, default=[100, 100])
+    p.add_argument("--chunk", type=int, nargs=2, default=[25, 25])
+    p.add_argument("--chunk-size", type=int, default=100, help="fits per compiled fit_batch call")
+    p.add_argument("--client", default=None, help="None (this process), 'processes', or a scheduler address")
+    p.add_argument("--dir", default=None, help="where to write the cube and the maps (default: a temporary dir)")
+    a = p.parse_args(argv)
+
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+
+    import fitting
+    import layerstack_jax as ls
+    from fitting._cube import fit_cube
+    from layerstack_jax._batched import predict
+    from layerstack_jax._cubes import read_zarr, write_zarr_cube
+
+    from .fitting_cases import SIGMA, WL, _f1_stack
+
+    ny, nx = a.size
+    rng = np.random.default_rng(1)
+    B = fitting.bspline_basis(WL, 3)
+    h = rng.uniform(15_000.0, 30_000.0, (ny, nx))
+    c = rng.uniform(0.5e-5, 4e-5, (ny, nx, 3))
+    geometry = ls.Sphere(8.0)
+    t0 = time.perf_counter()
+    clean = predict(_f1_stack(h[..., None], c @ B.T), WL, geometry, progress=False)
+    t_data = time.perf_counter() - t0
+    cube = (clean + SIGMA * rng.standard_normal(clean.shape)).astype(np.float32)
+    bad = rng.random((ny, nx)) < 0.01
+    cube[bad, 17] = np.nan
+    work = Path(a.dir) if a.dir else Path(tempfile.mkdtemp(prefix="cube_bench_"))
+    work.mkdir(parents=True, exist_ok=True)
+    store = work / "cube.zarr"
+    write_zarr_cube(cube, store, WL, chunks=(a.chunk[0], a.chunk[1], -1))
+    del cube, clean
+    lazy = read_zarr(store)
+    obj = fitting.Objective(_f1_stack(20_000.0, B @ np.full(3, 1e-5)), WL,
+                            fitting.Dataset(geometry, np.full(WL.size, 0.3), sigma=SIGMA),
+                            [fitting.thickness("top"), fitting.alpha("ink", basis=B, value=np.full(3, 1e-5))])
+    # compile once on one solver chunk (both paths then reuse the objective's compiled solver)
+    warm = np.asarray(lazy.isel(y=0).values[: a.chunk_size], dtype=float)
+    warm = warm[np.isfinite(warm).all(-1)]
+    t0 = time.perf_counter()
+    fitting.fit_batch(obj, np.resize(warm, (a.chunk_size, WL.size)), chunk_size=a.chunk_size)
+    compile_s = time.perf_counter() - t0
+
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
+    pixels = np.asarray(lazy.values, dtype=float).reshape(-1, WL.size)
+    ok = np.isfinite(pixels).all(-1)
+    ref = fitting.fit_batch(obj, pixels[ok], chunk_size=a.chunk_size)
+    t_batch = time.perf_counter() - t0
+    del pixels
+
+    out = work / "maps.zarr"
+    shutil.rmtree(out, ignore_errors=True)
+    t0 = time.perf_counter()
+    maps = fit_cube(obj, lazy, out=out, chunk=tuple(a.chunk), chunk_size=a.chunk_size, client=a.client,
+                    resume=False, progress=False).load()
+    t_cube = time.perf_counter() - t0
+    load1 = os.getloadavg()
+    status = maps["status"].values.ravel()
+    names = json.loads(maps.attrs["parameter_variables"])
+    x = np.stack([maps[n].values.ravel()[status == 0] for n in names], axis=1)
+    agree = float(np.max(np.abs(x - ref.x) / np.maximum(np.abs(ref.x), 1e-300)))
+    res = {"size": [ny, nx], "wavelengths": int(WL.size), "chunk": a.chunk, "chunk_size": a.chunk_size,
+           "client": a.client, "pixels_fitted": int(ok.sum()), "pixels_nan": int((~ok).sum()),
+           "marked_nan": int((status == 2).sum()), "data_s": t_data, "compile_s": compile_s,
+           "fit_batch_s": t_batch, "fit_cube_s": t_cube, "ratio": t_cube / t_batch,
+           "fit_cube_pixels_per_s": ny * nx / t_cube, "max_rel_diff_maps_vs_fit_batch": agree,
+           "converged_frac": float(ref.converged.mean()), "peak_rss_bytes": _peak_rss(),
+           "loadavg_before": load0, "loadavg_after": load1, "cpu_count": os.cpu_count(), "dir": str(work)}
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "cube.json").write_text(json.dumps(res, indent=2))
+    md = ("| cube | pixels fitted | fit_batch (memory) s | fit_cube (zarr) s | ratio | px/s | maps vs fit_batch | "
+          "peak RSS MB | load avg |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n"
+          f"| {ny}×{nx}×{WL.size} | {res['pixels_fitted']} | {t_batch:.1f} | {t_cube:.1f} | {res['ratio']:.2f} | "
+          f"{res['fit_cube_pixels_per_s']:.1f} | {agree:.1e} | {res['peak_rss_bytes'] / 2**20:.0f} | "
+          f"{load0[0]:.1f}–{load1[0]:.1f} |\n")
+    (RESULTS / "cube.md").write_text(md)
+    print(json.dumps(res, indent=2))
+    print(md)
+    if not a.dir:
+        shutil.rmtree(work, ignore_errors=True)
+    return res
+
+
+if __name__ == "__main__":
+    main()

@@ -163,3 +163,18 @@ def test_missing_field_and_warnings():
         TableSurface(t._replace(k_t=np.full_like(t.k_r, 0.1)))
     with pytest.warns(UserWarning, match="creates energy"):
         TableSurface(t._replace(k_d=t.k_d * 50))
+
+
+def test_teapot_mesh_is_outward_and_well_formed():
+    """The generated teapot: indices in range, no degenerate-heavy mesh, and the body's triangles
+    wound outwards (positive signed volume by the divergence theorem, close to the volume of
+    revolution of its profile is not required: only its sign and magnitude order)."""
+    from layerstack_jax.render._scenes import teapot_mesh
+
+    v, f = teapot_mesh(24)
+    assert f.min() >= 0 and f.max() < len(v)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    volume = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0
+    assert 0.3 < volume < 2.0  # a pot ~1.2 wide and ~1 high, with spout and handle
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    assert np.mean(area < 1e-12) < 0.05

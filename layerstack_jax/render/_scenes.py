@@ -159,7 +159,7 @@ def _teapot_file(resolution: int) -> str:
 
 
 # -- lights, camera, scenes -------------------------------------------------------------------
-def lamp_emitters(lamp: str = LAMP, lamp_radiance: float = 12.0, surround: float = 0.25) -> dict:
+def lamp_emitters(lamp: str = LAMP, lamp_radiance: float = 12.0, surround: float = 0.06) -> dict:
     """The fluorescent lamp: a 2 × 0.6 rectangle above and in front of the objects (radiance
     ``lamp_radiance`` × the normalized spectrum) and a uniform surround of ``surround`` × the
     same spectrum."""
@@ -192,7 +192,7 @@ def _floor() -> dict:
     return {
         "type": "rectangle",
         "to_world": mi.ScalarTransform4f().scale([20.0, 20.0, 1.0]),
-        "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.35}},
+        "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.25}},
     }
 
 

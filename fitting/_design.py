@@ -11,8 +11,9 @@ with :math:`Q` a reflectance, transmittance or absorptance of the stack
 (:func:`layerstack_jax.specular`, natural or polarized light). ``'below'`` / ``'above'`` targets
 penalise only the side that violates the bound (a one-sided tolerance band), as thin-film
 design programs do. :math:`M` is minimised over the free thicknesses within bounds by L-BFGS-B,
-gradients by reverse-mode autodiff through the Rouard recursion: jaxopt's, several starts run
-as one vmapped solve, or SciPy's on the host (one compiled merit and gradient, quick to start).
+gradients by reverse-mode autodiff through the Rouard recursion — the bounded driver shared
+with :func:`~fitting.fit` (:mod:`fitting._bounded`): jaxopt's, several starts run as one
+vmapped solve, or SciPy's on the host (one compiled merit and gradient, quick to start).
 
 The **needle method** (Tikhonravov, Trubetskov & DeBell, Appl. Opt. 35, 5493 (1996)) grows a
 design: the derivative of :math:`M` with respect to the thickness of an infinitesimally thin
@@ -31,12 +32,13 @@ from typing import Literal, NamedTuple, Optional, Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jaxopt
 import numpy as np
 from jaxtyping import Array, Float
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
+
+from ._bounded import BoundedSolution, compiled_lbfgsb, host_lbfgsb
 
 __all__ = [
     "SpectralTarget",
@@ -245,54 +247,27 @@ class DesignResult(NamedTuple):
     message: str
 
 
-def _solve_jaxopt(total, X0, lo, hi, maxiter: int, tol: float):
-    """All starts ``X0`` ``(S, F)`` in one compiled, vmapped jaxopt L-BFGS-B solve."""
-    solver = jaxopt.LBFGSB(fun=total, maxiter=maxiter, tol=tol)
-    bounds = (jnp.asarray(lo), jnp.asarray(hi))
+def _messages(sol: BoundedSolution, maxiter: int, tol: float, driver: str) -> list:
+    return [
+        f"converged in {int(k)} iterations ({driver}; projected-gradient norm {g:.1e}, tol {tol:g})" if ok
+        else f"NOT converged: {int(k)} iterations (maxiter {maxiter}, {driver}), projected-gradient norm {g:.1e} > tol {tol:g}"
+        for k, g, ok in zip(np.atleast_1d(sol.num_steps), np.atleast_1d(sol.gradient_norm), np.atleast_1d(sol.converged))
+    ]
+
+
+def _solve_compiled(total, X0, lo, hi, maxiter: int, tol: float) -> BoundedSolution:
+    """All starts ``X0`` ``(S, F)`` in one compiled, vmapped L-BFGS-B solve
+    (:func:`fitting._bounded.compiled_lbfgsb`)."""
+    run = compiled_lbfgsb(lambda x: total(x), maxiter, tol)
+    lower, upper = jnp.asarray(lo), jnp.asarray(hi)
 
     @jax.jit
     def solve_all(X):
         if X.shape[0] == 1:  # one start: no vmap (compiles ~1.5x faster)
-            sol = solver.run(X[0], bounds=bounds)
-            return tuple(a[None] for a in (sol.params, total(sol.params), sol.state.iter_num, sol.state.error))
-        sol = jax.vmap(lambda x0: solver.run(x0, bounds=bounds))(X)
-        return sol.params, jax.vmap(total)(sol.params), sol.state.iter_num, sol.state.error
+            return jax.tree.map(lambda a: a[None], run(X[0], lower, upper))
+        return jax.vmap(lambda x0: run(x0, lower, upper))(X)
 
-    params, values, iters, errors = (np.asarray(a) for a in solve_all(jnp.asarray(X0)))
-    messages = [
-        f"converged in {int(n)} iterations (projected-gradient norm {e:.1e} <= {tol:g})" if e <= tol
-        else f"NOT converged: {int(n)} iterations (maxiter {maxiter}), projected-gradient norm {e:.1e} > tol {tol:g}"
-        for n, e in zip(iters, errors)
-    ]
-    return params, values, iters, errors <= tol, messages, float(total(jnp.asarray(X0[0])))
-
-
-def _solve_scipy(total, X0, lo, hi, maxiter: int, tol: float):
-    """Each start in turn with SciPy's L-BFGS-B (Byrd, Lu, Nocedal & Zhu 1995) on the host; the
-    merit and its exact gradient are compiled once (quick to start: no solver to compile)."""
-    from scipy.optimize import Bounds, minimize
-
-    value_and_grad = jax.jit(jax.value_and_grad(total))
-
-    def fun(x):
-        v, g = value_and_grad(jnp.asarray(x))
-        return float(v), np.asarray(g, dtype=float)
-
-    params, values, iters, ok, messages = [], [], [], [], []
-    for x0 in X0:
-        r = minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=Bounds(lo, hi),
-                     options={"maxiter": maxiter, "gtol": tol, "ftol": 1e-12})
-        g = fun(r.x)[1]
-        pg = float(np.linalg.norm(np.clip(r.x - g, lo, hi) - r.x))  # projected-gradient norm
-        params.append(r.x)
-        values.append(r.fun)
-        iters.append(r.nit)
-        ok.append(bool(r.success))
-        text = r.message if isinstance(r.message, str) else r.message.decode()
-        messages.append(f"{'converged' if r.success else 'NOT converged:'} in {r.nit} iterations (SciPy L-BFGS-B: "
-                        f"{text.lower()}; projected-gradient norm {pg:.1e})")
-    return (np.asarray(params), np.asarray(values), np.asarray(iters), np.asarray(ok), messages,
-            fun(X0[0])[0])
+    return BoundedSolution(*(np.asarray(a) for a in solve_all(jnp.asarray(X0))))
 
 
 def optimize_thicknesses(
@@ -347,16 +322,25 @@ def optimize_thicknesses(
     scale = 100.0  # nm: variables of order one for L-BFGS-B
 
     def total(x):
-        d = x * scale
+        # The model sees thicknesses >= 0 and finite: under vmap, the lanes of starts that have
+        # already stopped keep being evaluated on whatever they hold, and the stack's own checks
+        # (thickness >= 0 and finite) would stop the whole solve. A start whose iterate is NaN is
+        # still reported as not converged (BoundedSolution checks its x).
+        d = jnp.maximum(jnp.where(jnp.isfinite(x), x, 0.0) * scale, 0.0)
         if robust is None:
             return merit(with_thicknesses(stack, free, d), targets)
         return _expected_merit(stack, targets, free, d, robust)
 
-    solve = _solve_jaxopt if method == "jaxopt" else _solve_scipy
-    params, values, iters, ok, messages, initial = solve(total, X0 / scale, lo / scale, hi / scale, maxiter, tol)
-    values = np.where(np.isfinite(values), values, np.inf)
+    if method == "jaxopt":
+        sol = _solve_compiled(total, X0 / scale, lo / scale, hi / scale, maxiter, tol)
+    else:
+        sol = host_lbfgsb(total, X0 / scale, lo / scale, hi / scale, maxiter, tol)
+    messages = _messages(sol, maxiter, tol, "jaxopt L-BFGS-B" if method == "jaxopt" else "SciPy L-BFGS-B")
+    initial = float(total(jnp.asarray(X0[0] / scale)))
+    values = np.where(np.isfinite(sol.value), sol.value, np.inf)
     best = int(np.argmin(values))
-    d_best = params[best] * scale
+    d_best = sol.x[best] * scale
+    iters, ok = sol.num_steps, sol.converged
     return DesignResult(
         stack=with_thicknesses(stack, free, jnp.asarray(d_best)),
         thickness_nm=d_best,
@@ -510,6 +494,7 @@ def needle_design(
     names: Optional[Sequence[str]] = None,
     start: Optional[DesignResult] = None,
     method: Literal["jaxopt", "scipy"] = "jaxopt",
+    progress: bool = True,
 ) -> tuple[DesignResult, list[dict]]:
     """Grow a design by the needle method: refine, scan the needle function, insert, repeat.
 
@@ -518,8 +503,11 @@ def needle_design(
     ``names[m]`` after their material (default ``"needle"``). ``start``: a refinement of
     ``stack`` already made (e.g. multi-start, with per-layer bounds) to begin from instead of
     refining ``stack`` again; ``method``: of the refinements (:func:`optimize_thicknesses`).
-    Returns the final :class:`DesignResult` and a history (one dict per step: layers, merit,
-    inserted needle).
+    ``progress``: a progress bar (tqdm) over the refinements, with the current layer count and
+    merit. The final design holds no coherent layer thinner than ``min_thickness_nm``: such
+    layers are removed and the design refined again (a history entry with
+    ``"removed_thin_layers"``). Returns the final :class:`DesignResult` and a history (one dict
+    per step: layers, merit, inserted needle).
 
     Thicknesses in nm (``bounds_nm``: ``(lower, upper)``, scalars applied to every layer;
     ``min_thickness_nm``); merits are dimensionless scalars.
@@ -527,22 +515,60 @@ def needle_design(
     def refine(st):
         return optimize_thicknesses(st, targets, bounds_nm=bounds_nm, maxiter=maxiter, method=method)
 
-    result = start if start is not None else refine(stack)
-    history = [{"layers": len(result.stack.layers), "merit": result.merit, "needle": None}]
-    for _ in range(iterations):
-        current = _drop_thin_layers(result.stack, min_thickness_nm)
-        if max_layers is not None and len(current.layers) + 2 > max_layers:
-            break
-        scan = needle_function(current, targets, materials, points_per_layer=points_per_layer)
-        candidate, needle = insert_needle(current, scan, materials, names=names)
-        if needle is None:
-            break
-        refined = refine(candidate)
-        if refined.merit >= result.merit:
-            break
-        result = refined
-        history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": needle})
+    bar = _progress_bar(progress, iterations)
+    try:
+        result = start if start is not None else refine(stack)
+        history = [{"layers": len(result.stack.layers), "merit": result.merit, "needle": None}]
+        _advance(bar, result, "refined start")
+        for _ in range(iterations):
+            current = _drop_thin_layers(result.stack, min_thickness_nm)
+            if max_layers is not None and len(current.layers) + 2 > max_layers:
+                break
+            scan = needle_function(current, targets, materials, points_per_layer=points_per_layer)
+            candidate, needle = insert_needle(current, scan, materials, names=names)
+            if needle is None:
+                break
+            refined = refine(candidate)
+            if refined.merit >= result.merit:
+                break
+            result = refined
+            history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": needle})
+            _advance(bar, result, "needle inserted")
+        result = _enforce_min_thickness(result, min_thickness_nm, refine, history)
+    finally:
+        if bar is not None:
+            bar.close()
     return result, history
+
+
+def _thin_layers(stack: ls.Stack, min_nm: float) -> list:
+    return [i for i, layer in enumerate(stack.layers)
+            if layer.coherent and float(np.asarray(layer.thickness)) < min_nm]
+
+
+def _enforce_min_thickness(result: DesignResult, min_nm: float, refine, history: list) -> DesignResult:
+    """The final design without coherent layers thinner than ``min_nm``: they are removed and
+    the rest refined again, until none is left (each pass removes at least one layer)."""
+    while _thin_layers(result.stack, min_nm):
+        removed = len(_thin_layers(result.stack, min_nm))
+        result = refine(_drop_thin_layers(result.stack, min_nm))
+        history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": None,
+                        "removed_thin_layers": removed})
+    return result
+
+
+def _progress_bar(progress: bool, iterations: int):
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=iterations + 1, desc="needle design", unit="step")
+
+
+def _advance(bar, result: DesignResult, what: str) -> None:
+    if bar is not None:
+        bar.set_postfix_str(f"{what}: {len(result.stack.layers)} layers, merit {result.merit:.4g}")
+        bar.update(1)
 
 
 # ------------------------------------------------------------------ tolerances and yield

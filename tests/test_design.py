@@ -102,7 +102,9 @@ def test_broadband_ar_with_database_materials_and_needles():
                                       bounds_nm=(0.0, 400.0), points_per_layer=16, method="scipy")
     assert len(result.stack.layers) <= 6
     assert result.merit < 0.5 * two.merit  # the needles helped
-    assert [h["merit"] for h in history] == sorted((h["merit"] for h in history), reverse=True)
+    merits = [h["merit"] for h in history if "removed_thin_layers" not in h]  # needle steps only
+    assert merits == sorted(merits, reverse=True)
+    assert not [layer for layer in result.stack.layers if float(layer.thickness) < 0.5]  # min_thickness_nm
     wls = np.asarray(wl)
     Rs = []
     for lam in wls:
@@ -195,3 +197,59 @@ def test_bad_design_input():
         D.optimize_thicknesses(stack, [ok], bounds_nm=(0.0, 50.0))
     with pytest.raises(ls.LayerstackError, match="at least one target"):
         D.merit(stack, [])
+
+
+# ------------------------------------------------------------------ issue 18, row 10
+def _readme_needle_case():
+    """The README's call: 2 layers (SiO2 / TiO2, database), a 27-wavelength AR target."""
+    sio2, tio2 = ls.material("SiO2", "Malitson"), ls.material("TiO2", "Devore-o")
+    wl = jnp.linspace(450.0, 650.0, 27)
+    stack = ls.Stack(1.0, [ls.Layer(sio2, 100.0), ls.Layer(tio2, 100.0)], ls.Substrate(1.52))
+    return stack, [D.SpectralTarget(wl, 0.0, 0.005)], [sio2, tio2]
+
+
+def _thin(stack, min_nm):
+    return [float(layer.thickness) for layer in stack.layers if layer.coherent and float(layer.thickness) < min_nm]
+
+
+def test_min_thickness_holds_on_the_final_design():
+    """A refined design that still holds layers of 0.16 and 0.67 nm (what the user got with
+    min_thickness_nm = 0.5): the final design drops them and is refined again."""
+    wl = jnp.linspace(450.0, 650.0, 5)
+    targets = [D.SpectralTarget(wl, 0.0, 0.005)]
+    thin = ls.Stack(1.0, [ls.Layer(1.46, 90.0), ls.Layer(2.35, 0.16), ls.Layer(1.46, 0.67), ls.Layer(2.35, 20.0)],
+                    ls.Substrate(1.52))
+
+    def refine(st):
+        return D.optimize_thicknesses(st, targets, bounds_nm=(0.0, 400.0), method="scipy")
+
+    history = []
+    start = refine(thin)._replace(stack=thin)
+    final = D._enforce_min_thickness(start, 0.5, refine, history)
+    assert not _thin(final.stack, 0.5)
+    assert len(final.stack.layers) <= 3 and history and history[0]["removed_thin_layers"] >= 1
+
+
+def test_needle_design_shows_progress_and_keeps_min_thickness(capsys):
+    """A short needle design (constant indices, host L-BFGS-B): a progress bar on stderr, no
+    layer thinner than min_thickness_nm in the result."""
+    wl = jnp.linspace(450.0, 650.0, 9)
+    stack = ls.Stack(1.0, [ls.Layer(1.46, 100.0), ls.Layer(2.35, 100.0)], ls.Substrate(1.52))
+    result, history = D.needle_design(stack, [D.SpectralTarget(wl, 0.0, 0.005)], [1.46, 2.35], iterations=1,
+                                      points_per_layer=4, bounds_nm=(0.0, 400.0), min_thickness_nm=0.5,
+                                      method="scipy")
+    assert not _thin(result.stack, 0.5)
+    assert result.merit <= history[0]["merit"]
+    err = capsys.readouterr().err
+    assert "needle design" in err and "merit" in err
+
+
+@pytest.mark.slow
+def test_needle_design_readme_call_as_the_user_made_it(capsys):
+    """Exactly the README call (2 database layers, 27 λ; compiled L-BFGS-B, 5 iterations, 32
+    points per layer): minutes of compilation, now with a progress bar, and the final design
+    keeps min_thickness_nm."""
+    stack, targets, materials = _readme_needle_case()
+    result, _ = D.needle_design(stack, targets, materials)
+    assert not _thin(result.stack, 0.5)
+    assert "needle design" in capsys.readouterr().err

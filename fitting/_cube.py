@@ -66,7 +66,7 @@ from ._batch import fit_batch
 from ._objective import Objective
 from ._results import linearised_covariance
 
-__all__ = ["fit_cube", "STATUS", "degeneracy", "cube_regions"]
+__all__ = ["fit_cube", "STATUS", "structural_degeneracy", "rank_at_start", "cube_regions"]
 
 log = logging.getLogger("fitting.cube")
 
@@ -89,29 +89,31 @@ def _var(name: str) -> str:
     return _SAFE.sub("_", name).strip("_") or "parameter"
 
 
-def degeneracy(objective: Objective, *, rank_rtol: float = 1e-8) -> tuple:
-    """Degeneracies of ``objective`` known before fitting: ``(structural, rank_at_start)``.
-
-    ``structural``: messages for incoherent layers whose thickness and α are both free (only
-    α·h enters Beer's law, Simonot eq. 20: no data can separate them). ``rank_at_start``: the
-    rank of the normalised Jacobian of the residuals at the starting values
-    (:func:`fitting._results.linearised_covariance`), to compare with the number of free
-    parameters."""
+def structural_degeneracy(objective: Objective) -> list:
+    """Degeneracies of ``objective`` by construction, known without computing anything: one
+    message per incoherent layer whose thickness and α are both free (only α·h enters Beer's
+    law, Simonot eq. 20: no data can separate them)."""
     free = {p.path for p in objective.layout.params if not np.all(p.fixed)}
-    structural = []
+    out = []
     for i, layer in enumerate(objective.stack.layers):
-        if not layer.coherent and ("layers", i, "thickness") in free and ("layers", i, "alpha") in free:
+        refs = (i, layer.name) if layer.name else (i,)
+        if not layer.coherent and any(("layers", r, "thickness") in free for r in refs) \
+                and any(("layers", r, "alpha") in free for r in refs):
             label = layer.name or f"layers[{i}]"
-            structural.append(
-                f"{label}: thickness and alpha are both free, but an incoherent layer's spectra depend on them only "
-                "through alpha·h (Beer's law): fix one of them (e.g. a known thickness)")
+            out.append(f"{label}: thickness and alpha are both free, but an incoherent layer's spectra depend on "
+                       "them only through alpha·h (Beer's law): fix one of them (e.g. a known thickness)")
+    return out
+
+
+def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
+    """Rank of the normalised Jacobian of the residuals at the starting values
+    (:func:`fitting._results.linearised_covariance`; compare with the number of free parameters)."""
     layout = objective.layout
     x0 = jnp.asarray(layout.x0)
     args = objective.args()
     J = jax.jacfwd(lambda x: objective.residuals(x, args, objective.optics))(x0)
     J = np.asarray(J) * layout.scale[None, :]
-    _, _, rank, _, _ = linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)
-    return structural, int(rank)
+    return int(linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)[2])
 
 
 def cube_regions(shape: tuple, chunk: tuple) -> list:
@@ -373,13 +375,13 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             raise LayerstackError(f"fit_cube: mask must be boolean shaped {(ny, nx)} (True = fit), got "
                                   f"{mask.dtype} {mask.shape}")
     # degeneracies: before any pixel is fitted
-    structural, rank0 = degeneracy(objective)
+    structural = structural_degeneracy(objective)
     if structural:
         text = "fit_cube: the objective is degenerate by construction: " + "; ".join(structural)
         if not allow_degenerate:
             raise LayerstackError(text + " (allow_degenerate=True fits anyway; every pixel is then non-identifiable)")
         warnings.warn(text, stacklevel=2)
-    elif rank0 < objective.n_parameters:
+    elif (rank0 := rank_at_start(objective)) < objective.n_parameters:
         warnings.warn(f"fit_cube: the Jacobian at the starting values has rank {rank0} < {objective.n_parameters} free "
                       "parameters: some combination is not determined there (see each pixel's 'identifiable' map)",
                       stacklevel=2)

@@ -159,6 +159,13 @@ def test_wavelength_mismatch_and_degenerate_objective_refused_before_compute(tmp
     with pytest.raises(ls.LayerstackError, match=r"varnish: thickness and alpha are both free.*alpha·h"):
         fit_cube(obj, np.full((2, 2, 4), 0.3), wavelength_nm=wl, out=tmp_path / "b.zarr")
     assert not (tmp_path / "b.zarr").exists()  # refused before anything was written or fitted
+    # allowed: warned once, up front; here every pixel is no-data, so nothing is fitted at all
+    with pytest.warns(UserWarning, match="degenerate by construction") as record:
+        maps = fit_cube(obj, np.full((1, 2, 4), np.nan), wavelength_nm=wl, out=tmp_path / "c.zarr",
+                        allow_degenerate=True, progress=False)
+    assert sum("degenerate" in str(w.message) for w in record) == 1
+    np.testing.assert_array_equal(maps["status"].values, [[2, 2]])
+    assert np.all(np.isnan(maps["thickness_varnish"].values))
 
 
 _CHILD = textwrap.dedent("""

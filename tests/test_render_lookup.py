@@ -178,3 +178,13 @@ def test_teapot_mesh_is_outward_and_well_formed():
     assert 0.3 < volume < 2.0  # a pot ~1.2 wide and ~1 high, with spout and handle
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     assert np.mean(area < 1e-12) < 0.05
+
+
+def test_missing_mitsuba_names_the_extra(monkeypatch):
+    import sys
+
+    from layerstack_jax.render import coated_bsdf
+
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # `import mitsuba` raises ImportError
+    with pytest.raises(ImportError, match=r"pip install 'layerstack-jax\[render\]'"):
+        coated_bsdf(_tables())

@@ -52,7 +52,7 @@ def import_mitsuba():
     try:
         import drjit
         import mitsuba
-    except ImportError as err:  # pragma: no cover - exercised only without the extra
+    except ImportError as err:
         raise ImportError(
             f"layerstack_jax.render needs Mitsuba 3 (the 'render' extra): {_INSTALL}  ({err})"
         ) from err
@@ -243,9 +243,9 @@ def coated_bsdf(tables, *, variant: str | None = None, timings: dict | None = No
     Returns:
         A ``mi.BSDF`` to put in a scene dictionary (``"bsdf": coated_bsdf(tables)``).
     """
+    mi, _ = import_mitsuba()  # first: without the extra, say how to install it
     surface = TableSurface(tables)
     name = register(variant)
-    mi, _ = import_mitsuba()
     key = f"coating-{next(_IDS)}"
     _SURFACES[key] = (surface, timings)
     return mi.load_dict({"type": name, "surface_id": key})

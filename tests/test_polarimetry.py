@@ -478,7 +478,7 @@ def test_rough_tends_to_smooth():
     wl = WL
     alpha = 2e-3
     for th in (0.0, 30.0, 60.0):
-        R = np.asarray(ls.specular(st, wl, math.radians(th), both_sides=False).natural().R_front)
+        R = np.asarray(ls.specular(st, wl, angle_rad=math.radians(th), both_sides=False).natural().R_front)
         np.testing.assert_allclose(_lobe_albedo(st, wl, th, alpha, "ggx"), R, rtol=2e-3)
     rough = np.asarray(rough_jit(st, wl, INC, VIEW, 90.0, roughness=alpha, distribution="beckmann").diffuse)
     smooth = np.asarray(_diffuse_all(st, wl, INC, VIEW)[2])  # same shapes as the fixture: cached

@@ -75,14 +75,17 @@ from ._stack import TabulatedSpectrum as TabulatedSpectrum
 from ._stack import check_stack as check_stack
 from ._validate import LayerstackError as LayerstackError
 from ._validate import LayerstackWarning as LayerstackWarning
+from .io import Measurement as Measurement
 from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack
 from .io import parse_wavelengths as parse_wavelengths
 from .io import read_csv_columns as read_csv_columns
+from .io import read_measurement as read_measurement
 from .io import read_spectra_csv as read_spectra_csv
 from .io import save_spectra_csv as save_spectra_csv
 from .io import save_stack as save_stack
 from .io import stack_from_dict as stack_from_dict
 from .io import stack_to_dict as stack_to_dict
+from .io import write_measurement_csv as write_measurement_csv
 
 __version__ = "0.1.0"

@@ -84,6 +84,19 @@ which reads them with the same grammar (:class:`FileLocation`, :func:`reject_unk
 :func:`read_number`, :func:`read_material`, :data:`FREE_KEYS`, :func:`stack_from_dict`), so
 every message has the same form.
 
+Measurement files
+-----------------
+:func:`read_measurement` reads what instruments export and returns one :class:`Measurement`
+(quantity, angles in degrees, wavelengths in nm, values, σ where the file has them, the file's
+conventions): Woollam WVASE / CompleteEASE ``.dat`` (:func:`read_woollam`), Sentech SpectraRay
+``.txt`` (:func:`read_sentech`), Accurion EP3/EP4 (:func:`read_accurion`), NeXus NXellipsometry
+(:func:`read_nexus`, needs ``h5py``), JCAMP-DX R/T spectra (:func:`read_jcamp`, needs ``jcamp``)
+and plain CSV with units in the header (:func:`read_measurement_csv`); the format is sniffed from
+the content (:func:`sniff_format`). ψ, Δ and Mueller elements are kept as the instrument reports
+them — the library's public convention is the instruments' — and only units are converted at
+the door. A file that cannot be read raises :class:`LayerstackError` naming the line and why.
+Real files with their provenance and licences: ``examples/data/README.md``.
+
 Spectra and wavelengths
 -----------------------
 :func:`save_spectra_csv` writes ``wavelength_nm`` and named columns; :func:`parse_wavelengths`
@@ -101,6 +114,17 @@ from ._file_grammar import read_number as read_number
 from ._file_grammar import read_number_list as read_number_list
 from ._file_grammar import read_toml as read_toml
 from ._file_grammar import reject_unknown_keys as reject_unknown_keys
+from ._measurement import Measurement as Measurement
+from ._readers import read_accurion as read_accurion
+from ._readers import read_jcamp as read_jcamp
+from ._readers import read_measurement as read_measurement
+from ._readers import read_measurement_csv as read_measurement_csv
+from ._readers import read_nexus as read_nexus
+from ._readers import read_sentech as read_sentech
+from ._readers import read_woollam as read_woollam
+from ._readers import sniff_format as sniff_format
+from ._readers import wavelength_to_nm as wavelength_to_nm
+from ._readers import write_measurement_csv as write_measurement_csv
 from ._spectra_csv import parse_wavelengths as parse_wavelengths
 from ._spectra_csv import read_csv_columns as read_csv_columns
 from ._spectra_csv import read_spectra_csv as read_spectra_csv
@@ -135,4 +159,15 @@ __all__ = [
     "check_range",
     "read_toml",
     "read_material",
+    "Measurement",
+    "read_measurement",
+    "read_woollam",
+    "read_sentech",
+    "read_accurion",
+    "read_nexus",
+    "read_jcamp",
+    "read_measurement_csv",
+    "write_measurement_csv",
+    "sniff_format",
+    "wavelength_to_nm",
 ]

@@ -1,0 +1,114 @@
+"""The house stays one-way (issue 17, docs/architecture.md): read from the source, not run.
+
+* nothing under ``layerstack_jax/`` imports ``fitting`` or ``layerstack_cli``; nothing under
+  ``fitting/`` imports ``layerstack_cli``;
+* no import cycle among the module-level imports of ``layerstack_jax``, ``fitting``,
+  ``layerstack_cli`` and ``benchmarks``;
+* no ``isinstance`` on a concrete geometry class outside the module that defines it;
+* no access to private attributes of optimistix, equinox or jaxopt.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("layerstack_jax", "fitting", "layerstack_cli", "benchmarks")
+GEOMETRY_CLASSES = {"Sphere": "_geometry.py", "Directional": "_geometry.py", "BRDF": "_geometry.py",
+                    "Specular": "_geometry.py", "Ellipsometric": "_ellipsometry.py"}
+
+
+def _modules(package: str) -> dict[str, Path]:
+    return {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in (ROOT / package).rglob("*.py")}
+
+
+def _imports(path: Path, module: str, *, top_level_only: bool) -> set[str]:
+    """Absolute names of the modules ``path`` imports (relative imports resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = set()
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package
+                for _ in range(node.level - 1):
+                    base = base.rpartition(".")[0]
+                name = f"{base}.{node.module}" if node.module else base
+            else:
+                name = node.module or ""
+            out.add(name)
+            out |= {f"{name}.{a.name}" for a in node.names}
+    return out
+
+
+@pytest.mark.parametrize("package, forbidden", [("layerstack_jax", ("fitting", "layerstack_cli")),
+                                                ("fitting", ("layerstack_cli",))])
+def test_dependencies_point_one_way(package, forbidden):
+    bad = []
+    for module, path in _modules(package).items():
+        for name in _imports(path, module, top_level_only=False):
+            if name.split(".")[0] in forbidden:
+                bad.append(f"{path.relative_to(ROOT)} imports {name}")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_import_cycles():
+    modules = {}
+    for package in PACKAGES:
+        modules |= _modules(package)
+    graph = {m: {n for n in _imports(p, m, top_level_only=True) if n in modules and n != m} for m, p in modules.items()}
+    # a module importing its own package's __init__ re-exports is not a cycle of concepts
+    for m in graph:
+        graph[m] = {n for n in graph[m] if not m.startswith(n + ".")}
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(m, trail):
+        state[m] = 1
+        for n in graph[m]:
+            if state.get(n) == 1:
+                cycles.append(" -> ".join(trail[trail.index(n):] + [n]) if n in trail else f"{m} -> {n}")
+            elif n not in state:
+                visit(n, trail + [n])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert not cycles, "\n".join(cycles)
+
+
+def test_no_isinstance_on_geometry_classes_outside_their_module():
+    bad = []
+    for package in PACKAGES:
+        for module, path in _modules(package).items():
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "isinstance" and len(node.args) == 2:
+                    names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
+                    names |= {n.attr for n in ast.walk(node.args[1]) if isinstance(n, ast.Attribute)}
+                    for cls in names & set(GEOMETRY_CLASSES):
+                        if path.name != GEOMETRY_CLASSES[cls] or package != "layerstack_jax":
+                            bad.append(f"{path.relative_to(ROOT)}:{node.lineno} isinstance(..., {cls})")
+    assert not bad, "\n".join(bad)
+
+
+_PRIVATE = re.compile(r"\b(optx|optimistix|eqx|equinox|jaxopt|lx|lineax)\.(?:[A-Za-z]\w*\.)*_[A-Za-z]\w*|RESULTS\._")
+
+
+def test_no_private_attributes_of_optimistix_equinox_jaxopt():
+    bad = []
+    for package in PACKAGES:
+        for module, path in _modules(package).items():
+            for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                code = line.split("#", 1)[0]
+                if _PRIVATE.search(code):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert not bad, "\n".join(bad)

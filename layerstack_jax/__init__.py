@@ -23,6 +23,8 @@ from ._database import DatabaseFormula as DatabaseFormula
 from ._database import database_version as database_version
 from ._database import material as material
 from ._database import material_sources as material_sources
+from ._effective_medium import Bruggeman as Bruggeman
+from ._effective_medium import Looyenga as Looyenga
 from ._ellipsometry import Ellipsometric as Ellipsometric
 from ._ellipsometry import Ellipsometry as Ellipsometry
 from ._ellipsometry import ellipsometry as ellipsometry
@@ -51,6 +53,12 @@ from ._materials import Material as Material
 from ._materials import Sellmeier as Sellmeier
 from ._materials import Tabulated as Tabulated
 from ._optics import Optics as Optics
+from ._oscillators import CauchyUrbach as CauchyUrbach
+from ._oscillators import CodyLorentz as CodyLorentz
+from ._oscillators import Drude as Drude
+from ._oscillators import Lorentz as Lorentz
+from ._oscillators import TaucLorentz as TaucLorentz
+from ._oscillators import photon_energy as photon_energy
 from ._polarimetry import apply_mueller as apply_mueller
 from ._polarimetry import cloude_eigenvalues as cloude_eigenvalues
 from ._polarimetry import coherency_matrix as coherency_matrix

@@ -48,7 +48,7 @@ normalized Mueller matrix of the reflection is
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax.numpy as jnp
 
@@ -213,7 +213,43 @@ class Ellipsometric(Geometry):
             )
         _check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
 
-    def measure(self, stack: Stack, wavelength_nm) -> Float[Array, "*angle wl"]:
-        """The quantity read for ``stack`` on ``wavelength_nm`` (nm)."""
+    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S"
+    signed: ClassVar[bool] = True  # Δ, C, S may be negative
+    reads_diffuse_light: ClassVar[bool] = False
+    reading_is_fraction: ClassVar[bool] = False
+
+    def measure(self, stack: Stack, wavelength_nm, *, nodes: int = 0, optics=None) -> Float[Array, "*angle wl"]:
+        """The quantity read for ``stack`` on ``wavelength_nm`` (nm); ``nodes`` and ``optics``
+        are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
         e = ellipsometry(stack, wavelength_nm, self.angle_deg)
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
+
+    # the Geometry interface: an ellipsometer needs no Optics (it overrides measure)
+    def optics(self, rs, background, nodes):
+        return None
+
+    def read(self, rs, optics, background):
+        raise LayerstackError("Ellipsometric reads through measure(), not through Optics")
+
+    @property
+    def label(self) -> str:
+        a = self.angle_deg
+        text = f"{float(a):g}" if is_concrete(a) and jnp.ndim(a) == 0 else "array"
+        return f"ellipsometry:{text}:{self.quantity}"
+
+    @property
+    def quantity_label(self) -> str:
+        return {"psi": "psi (degrees)", "delta": "Delta (degrees)", "N": "N = cos 2psi", "C": "C = sin 2psi cos Delta",
+                "S": "S = sin 2psi sin Delta"}[self.quantity]
+
+    @classmethod
+    def parse(cls, text: str):
+        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C or S; default psi)."""
+        if not text.startswith("ellipsometry"):
+            return None
+        parts = text.split(":")
+        if not 2 <= len(parts) <= 3:
+            raise ValueError(text)
+        q = parts[2] if len(parts) > 2 else "psi"
+        q = q if q in ("psi", "delta") else q.upper()
+        return cls(float(parts[1]), q)

@@ -512,7 +512,7 @@ def test_rough_bad_input():
 def test_cli_polarization_and_ellipsometry_columns(tmp_path):
     """`layerstack predict --polarization pp --ellipsometry θ` writes f_pp of the brdf geometry
     (other geometries unchanged) and psi/Delta columns equal to the library's."""
-    from layerstack_jax.cli import main
+    from layerstack_cli import main
     from layerstack_jax.io import load_stack
 
     root = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples"

@@ -23,7 +23,9 @@ def _add_fit_parser(sub) -> None:
         "the report(s) and writes the results as JSON.",
     )
     p.add_argument("stack", metavar="STACK.toml", help="stack file with free parameters")
-    p.add_argument("data", metavar="DATA.csv", help="measured spectra: wavelength_nm, then one column per spectrum")
+    p.add_argument("data", metavar="DATA", help="measured spectra: a CSV (wavelength_nm, then one column per spectrum) "
+                   "or an instrument file (Woollam .dat, Sentech .txt, Accurion, NeXus .nxs, JCAMP-DX): geometry and "
+                   "angles then come from the file")
     p.add_argument("--geometry", "-g", metavar="GEOM",
                    help="measurement geometry of the spectra (see `layerstack predict -h`); needed unless every data "
                         "column is named by its geometry (e.g. 45/0): there is no default")
@@ -89,12 +91,121 @@ def _summary(results: list) -> list[str]:
     return lines
 
 
+def _nsc(psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
+    """N = cos 2ψ, C = sin 2ψ cos Δ, S = sin 2ψ sin Δ (wrap-free: a Δ reported in [0, 360) or
+    crossing ±180° gives the same values) and their σ by linear propagation of σψ, σΔ."""
+    psi, delta = np.deg2rad(psi_deg), np.deg2rad(delta_deg)
+    values = (np.cos(2 * psi), np.sin(2 * psi) * np.cos(delta), np.sin(2 * psi) * np.sin(delta))
+    if sigma_psi_deg is None:
+        return values, (None, None, None)
+    sp, sd = np.deg2rad(sigma_psi_deg), np.deg2rad(sigma_delta_deg)
+    c2, s2 = np.cos(2 * psi), np.sin(2 * psi)
+    sigmas = (np.abs(2 * s2 * sp),
+              np.hypot(2 * c2 * np.cos(delta) * sp, s2 * np.sin(delta) * sd),
+              np.hypot(2 * c2 * np.sin(delta) * sp, s2 * np.cos(delta) * sd))
+    floor = 1e-6  # a point with σ = 0 in N, C or S (e.g. ψ = 45°) keeps a finite weight
+    return values, tuple(np.maximum(s, floor) for s in sigmas)
+
+
+def _measurement_datasets(m, args) -> tuple[list, str, str]:
+    """Datasets of an instrument file, one per angle and quantity, with the file's σ; the
+    geometry is the file's (ellipsometer or spectrophotometer at the file's angles)."""
+    import fitting
+    from layerstack_jax import Ellipsometric, Specular
+
+    name = Path(args.data).name
+    valid = m.valid()
+    datasets = []
+    if m.quantity == "psi_delta":
+        sig = (None, None) if m.sigma is None else (m.sigma[:, 0], m.sigma[:, 1])
+        (N, C, S), sigmas = _nsc(m.psi_deg, m.delta_deg, *sig)
+        for i, angle in enumerate(np.asarray(m.angles_deg, float)):
+            for q, y, sq in (("N", N, sigmas[0]), ("C", C, sigmas[1]), ("S", S, sigmas[2])):
+                sigma = args.sigma if args.sigma is not None else (None if sq is None else np.where(valid[i], sq[i], 1.0))
+                datasets.append(fitting.Dataset(Ellipsometric(angle, q), np.where(valid[i], y[i], 0.0), sigma=sigma,
+                                                mask=valid[i], name=f"{name} {q} {angle:g} deg"))
+        label = "ellipsometry:" + ",".join(f"{a:g}" for a in m.angles_deg) + ":N,C,S"
+        origin = "from the file (psi/Delta fitted as N, C, S: free of Delta's wrap and of its reporting range)"
+    elif m.quantity in ("reflectance", "transmittance"):
+        q = "R" if m.quantity == "reflectance" else "T"
+        for i, angle in enumerate(np.asarray(m.angles_deg, float)):
+            sigma = args.sigma if args.sigma is not None else (None if m.sigma is None else m.sigma[i])
+            datasets.append(fitting.Dataset(Specular(angle, q), np.where(valid[i], m.values[i], 0.0), sigma=sigma,
+                                            mask=valid[i], name=f"{name} {q} {angle:g} deg"))
+        label = "specular:" + ",".join(f"{a:g}" for a in m.angles_deg) + f":{q}"
+        origin = "from the file"
+    else:
+        raise LayerstackError(f"{args.data}: fitting a {m.quantity} measurement from the command line is not supported "
+                              "yet (psi/Delta, reflectance and transmittance are); fit it in Python with fitting.Dataset")
+    return datasets, label, origin
+
+
+def _cmd_fit_measurement(args, m, start: float) -> int:
+    """``layerstack fit MODEL.toml MEASUREMENT`` for an instrument file: one joint fit of all its
+    angles and quantities."""
+    import json
+
+    if args.joint or args.background or args.columns:
+        raise LayerstackError(f"{args.data}: --joint, --background and --columns apply to CSV spectra, not to an "
+                              "instrument file (all its angles are fitted together)")
+    if args.geometry is not None:
+        raise LayerstackError(f"{args.data}: the file says how it was measured; -g is for CSV spectra")
+    grid = np.asarray(m.wavelength_nm, float) if args.wavelengths is None else parse_wavelengths(args.wavelengths)
+    with _precision(args.float32):
+        import fitting
+
+        stack, params = fitting.load_fit_parameters(args.stack)
+        datasets, label, origin = _measurement_datasets(m, args)
+        if args.wavelengths is not None:
+            datasets = [fitting.Dataset(d.geometry, d.data, sigma=d.sigma, mask=d.mask, name=d.name,
+                                        wavelength_nm=np.asarray(m.wavelength_nm, float)) for d in datasets]
+        try:
+            obj = fitting.Objective(stack, grid, datasets, params, nodes=args.nodes)
+        except LayerstackError as e:
+            raise LayerstackError(f"{args.data}: {e}") from None
+        result = fitting.fit(obj, args.method, starts=args.starts, max_steps=args.max_steps)
+    sigma_origin = _sigma_origin(args) if args.sigma is not None or m.sigma is None else "from the file"
+    print(f"geometry: {label} ({origin})\nsigma: {sigma_origin}")
+    print(result.report())
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    payload = {"stack": str(args.stack), "data": str(args.data), "format": m.file_format, "geometry": label,
+               "geometry_origin": origin, "sigma": args.sigma, "sigma_origin": sigma_origin,
+               "fits": [{"spectrum": Path(args.data).name, **result.to_dict()}]}
+    out.write_text(json.dumps(payload, indent=1))
+    print(f"{PROG}: wrote {out} (1 fit, {'converged' if result.converged else 'NOT converged'}) in "
+          f"{time.perf_counter() - start:.1f} s")
+    if args.plot:
+        plot = Path(args.plot)
+        result.plot(plot, title=f"{Path(args.stack).name} — {label}")
+        print(f"{PROG}: wrote {plot} (data vs fit)")
+    return 0 if result.converged else 1
+
+
+def _is_spectra_csv(path) -> bool:
+    from layerstack_jax.io import sniff_format
+
+    if sniff_format(path) != "csv":
+        return False
+    from layerstack_jax.io import read_spectra_csv
+
+    try:
+        read_spectra_csv(path)
+    except LayerstackError:
+        return False
+    return True
+
+
 def _cmd_fit(args) -> int:
     import json
 
-    from layerstack_jax.io import read_spectra_csv
+    from layerstack_jax.io import read_measurement, read_spectra_csv
 
     start = time.perf_counter()
+    if not Path(args.data).is_file():
+        raise LayerstackError(f"{args.data}: file not found")
+    if not _is_spectra_csv(args.data):
+        return _cmd_fit_measurement(args, read_measurement(args.data), start)
     data_wl, columns = read_spectra_csv(args.data)
     geometry, geometry_origin = _geometry(args, [n for n in columns if n != args.background])
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)

@@ -48,8 +48,17 @@ interface's :math:`t_{N+1}` attenuated by the Kirchhoff coherent factor
 :math:`\exp(-\tfrac12[k\sigma_0(q_N - q_{N+1})]^2)`, :math:`k = 2\pi/\lambda` (the mean
 transmitted field of a Gaussian surface); 0 into an absorbing object (Hirayama eq. 6).
 
-Natural light throughout: the s/p frames of the local facets are taken as those of the plane
-of incidence, as Hirayama does (an exact polarized treatment needs a Mueller calculus).
+Natural light by default; per polarization on request, with the s/p frames of the local facets
+taken as those of the plane of incidence, as Hirayama does (an exact polarized treatment needs
+a Mueller calculus).
+
+Which model for which object. This module: a rough *object* under films whose boundaries stay
+flat (paint levelled over a rough metal, a polished coating on a sand-blasted part; roughness
+heights σ0 ≲ λ, correlation lengths τ ~ λ, where wave effects — the e^{−g} specular loss that
+grows as σ0/λ, the directional-diffuse lobe — matter). :func:`layerstack_jax.rough_brdf`
+(:mod:`layerstack_jax._rough`): a *conformal* coating that follows a rough surface whose facets
+are much larger than the wavelength, each facet carrying the whole stack (Cook–Torrance /
+GGX / Beckmann, geometric optics, no σ0/λ dependence). Neither is the other's limit.
 """
 
 from __future__ import annotations
@@ -165,7 +174,8 @@ def _single_pass(rs, dirn: _Direction):
 
 def rough_diffuse(rs: ResolvedStack, s_in, s_out, phi, sigma0, tau, *, n_terms: int, uniform_albedo=0.0,
                   form: str = "radiometric", prefactor: str = "view", shadowing_form: str = "corrected"):
-    r"""Diffuse BRDF :math:`k_d` (1/sr), natural light, ``(*B, wl)`` of the coated rough object
+    r"""Diffuse BRDF :math:`k_d` (1/sr) per polarization, ``(2, *B, wl)`` (s, p; natural light is
+    their mean, :func:`layerstack_jax._response.natural`), of the coated rough object
     from incidence (Snell invariant ``s_in``) to viewing direction (``s_out``) at azimuth ``phi``
     (radians, 0 = forward side of the plane of incidence); the three have the same rank and broadcast to ``(*B, 1)`` or
     ``(*B, wl)``. ``form``, ``prefactor``: module docstring. Only the He–Torrance terms are
@@ -181,11 +191,11 @@ def rough_diffuse(rs: ResolvedStack, s_in, s_out, phi, sigma0, tau, *, n_terms: 
         T_in = safe_divide(_abs2(down_in) * d_in.flux[:, -2], d_in.flux[:, 0])
         T_out = safe_divide(_abs2(down_out) * d_out.flux[:, -2], d_out.flux[:, 0])
         ratio = (jnp.real(rs.n[0]) / n_N) ** 2
-        return ratio * natural(T_in * rho * T_out)
+        return ratio * (T_in * rho * T_out)
     if form == "literal":
         at = d_out if prefactor == "view" else d_in
         pref = _abs2(safe_divide_complex(at.q[-2], at.q[0]))
-        return natural(pref * _abs2(_single_pass(rs, d_out)) * _abs2(down_in) * rho)
+        return pref * _abs2(_single_pass(rs, d_out)) * _abs2(down_in) * rho
     raise LayerstackError(f"form must be one of {FORMS}, got {form!r}")
 
 
@@ -228,6 +238,7 @@ def coated_rough(
     prefactor: str = "view",
     shadowing_form: str = "corrected",
     n_terms: int | None = None,
+    polarized: bool = False,
 ) -> CoatedRough:
     r"""Specular reflectance :math:`k_r(\theta, \lambda)`, specular transmittance :math:`k_t` and
     diffuse BRDF :math:`k_d(\omega_l, \omega_v, \lambda)` of coherent films on a rough object
@@ -250,10 +261,14 @@ def coated_rough(
             ``"view"`` or ``"light"``; static.
         shadowing_form: ``"corrected"`` or ``"smith"`` (:mod:`layerstack_jax._he_torrance`).
         n_terms: terms of He's D series (static; default chosen from the inputs when concrete).
+        polarized: False (default): natural light, arrays ``(*angle, wl)``; True: per
+            polarization, arrays ``(*angle, 2, wl)`` with axis −2 ``(s, p)`` as in
+            :func:`layerstack_jax.specular` (s and p of the plane of incidence; the facets' own
+            frames are not rotated, as in Hirayama).
 
     Returns:
-        :class:`CoatedRough` with arrays ``(*angle, wl)``; ``k_r`` and ``k_t`` depend on the
-        incidence angle only (broadcast).
+        :class:`CoatedRough` with arrays ``(*angle, wl)`` (or ``(*angle, 2, wl)``); ``k_r`` and
+        ``k_t`` depend on the incidence angle only (broadcast).
     """
     check_coated_stack(stack)
     check_options(form, prefactor, shadowing_form)
@@ -266,12 +281,13 @@ def coated_rough(
     n_terms = auto_terms(sigma_nm, wl, resolve(stack, wl).n[-2], n_terms)
     return _coated_rough_core(stack, wl, jnp.asarray(incidence_deg), jnp.asarray(viewing_deg),
                               jnp.asarray(azimuth_deg), jnp.asarray(sigma_nm), jnp.asarray(tau_nm),
-                              jnp.asarray(uniform_albedo), n_terms, form, prefactor, shadowing_form)
+                              jnp.asarray(uniform_albedo), n_terms, form, prefactor, shadowing_form, bool(polarized))
 
 
 @eqx.filter_jit
 def _coated_rough_core(stack, wavelength_nm, incidence_deg, viewing_deg, azimuth_deg, sigma_nm, tau_nm,
-                       uniform_albedo, n_terms: int, form: str, prefactor: str, shadowing_form: str) -> CoatedRough:
+                       uniform_albedo, n_terms: int, form: str, prefactor: str, shadowing_form: str,
+                       polarized: bool) -> CoatedRough:
     """Compiled body of :func:`coated_rough` (inputs validated there)."""
     rs = resolve(stack, wavelength_nm)
     dtype = jnp.result_type(rs.wavelength.dtype, float)
@@ -282,5 +298,6 @@ def _coated_rough_core(stack, wavelength_nm, incidence_deg, viewing_deg, azimuth
     R, T = rough_specular(rs, s_in, sigma0, tau, shadowing_form=shadowing_form)
     k_d = rough_diffuse(rs, s_in, s_out, ph[..., None], sigma0, tau, n_terms=n_terms, uniform_albedo=uniform_albedo,
                         form=form, prefactor=prefactor, shadowing_form=shadowing_form)
-    shape = jnp.broadcast_shapes(k_d.shape, R.shape[1:])
-    return CoatedRough(*(jnp.broadcast_to(x, shape) for x in (natural(R), natural(T), k_d)))
+    shape = jnp.broadcast_shapes(k_d.shape, R.shape)
+    out = (jnp.broadcast_to(x, shape) for x in (R, T, k_d))
+    return CoatedRough(*(jnp.moveaxis(x, 0, -2) if polarized else natural(x) for x in out))

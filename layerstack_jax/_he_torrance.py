@@ -354,6 +354,7 @@ def he_torrance_brdf(
     uniform_albedo: RealLike = 0.0,
     shadowing_form: str = "corrected",
     n_terms: int | None = None,
+    polarized: bool = False,
 ) -> HeTorrance:
     r"""He–Torrance BRDF of a bare rough boundary (module docstring), natural light.
 
@@ -371,9 +372,11 @@ def he_torrance_brdf(
         shadowing_form: ``"corrected"`` (default) or ``"smith"`` (He et al. as printed); static.
         n_terms: terms of the D series (static); default from :func:`series_terms` when the
             inputs are concrete.
+        polarized: True returns arrays ``(*angle, 2, wl)``, axis −2 ``(s, p)`` (Fresnel factor
+            of that polarization; the uniform term is unpolarized); default natural light.
 
     Returns:
-        :class:`HeTorrance`, arrays ``(*angle, wl)``.
+        :class:`HeTorrance`, arrays ``(*angle, wl)`` (or ``(*angle, 2, wl)``).
     """
     wl = jnp.asarray(wavelength_nm)
     if wl.ndim != 1:
@@ -396,21 +399,24 @@ def he_torrance_brdf(
     n_terms = auto_terms(sigma_nm, wl, n_a, n_terms)
     return _he_torrance_core(wl, jnp.asarray(incidence_deg), jnp.asarray(viewing_deg), jnp.asarray(azimuth_deg),
                              n_a, jnp.asarray(n_b), jnp.asarray(sigma_nm), jnp.asarray(tau_nm),
-                             jnp.asarray(uniform_albedo), n_terms, shadowing_form)
+                             jnp.asarray(uniform_albedo), n_terms, shadowing_form, bool(polarized))
 
 
 @eqx.filter_jit
 def _he_torrance_core(wl, incidence_deg, viewing_deg, azimuth_deg, n_a, n_b, sigma_nm, tau_nm, uniform_albedo,
-                      n_terms: int, shadowing_form: str) -> HeTorrance:
+                      n_terms: int, shadowing_form: str, polarized: bool) -> HeTorrance:
     """Compiled body of :func:`he_torrance_brdf` (inputs validated there)."""
     dtype = jnp.result_type(wl.dtype, float)
     ti, to, ph = jnp.broadcast_arrays(*(jnp.deg2rad(x.astype(dtype)) for x in (incidence_deg, viewing_deg, azimuth_deg)))
     ci, co, ph = jnp.cos(ti)[..., None], jnp.cos(to)[..., None], ph[..., None]
     sigma0, tau = sigma_nm.astype(dtype), tau_nm.astype(dtype)
     eta = specular_amplitudes(n_a, n_b, ci, wl, sigma0, tau, form=shadowing_form)
-    spec = 0.5 * jnp.sum(jnp.real(eta) ** 2 + jnp.imag(eta) ** 2, axis=0)
-    dd = 0.5 * jnp.sum(directional_diffuse(n_a, n_b, ci, co, ph, wl, sigma0, tau, n_terms=n_terms,
-                                           form=shadowing_form), axis=0)
+    spec = jnp.real(eta) ** 2 + jnp.imag(eta) ** 2
+    dd = directional_diffuse(n_a, n_b, ci, co, ph, wl, sigma0, tau, n_terms=n_terms, form=shadowing_form)
+    if polarized:
+        spec, dd = jnp.moveaxis(spec, 0, -2), jnp.moveaxis(dd, 0, -2)
+    else:
+        spec, dd = 0.5 * (spec[0] + spec[1]), 0.5 * (dd[0] + dd[1])
     shape = jnp.broadcast_shapes(spec.shape, dd.shape)
     ud = jnp.broadcast_to(uniform_albedo.astype(dtype) / math.pi, shape)
     return HeTorrance(jnp.broadcast_to(spec, shape), jnp.broadcast_to(dd, shape), ud)

@@ -102,9 +102,9 @@ def _diffuse_block(stack, wl, cos_in, cos_out, phi, sigma0, tau, albedo, n_terms
     """k_d on one block of incidence cosines: ``(block, B, P, L)`` (1/sr)."""
     rs = resolve(stack, wl)
     n0 = jnp.real(jnp.asarray(rs.n[0]))
-    return rough_diffuse(rs, _snell(n0, cos_in)[:, None, None, None], _snell(n0, cos_out)[None, :, None, None],
+    return natural(rough_diffuse(rs, _snell(n0, cos_in)[:, None, None, None], _snell(n0, cos_out)[None, :, None, None],
                          phi[None, None, :, None], sigma0, tau, n_terms=n_terms, uniform_albedo=albedo, form=form,
-                         shadowing_form=shadowing_form)
+                         shadowing_form=shadowing_form))
 
 
 def _padded(x, n):

@@ -324,3 +324,15 @@ def test_angle_grids():
     np.testing.assert_allclose(angle_grid(4, "cos"), [0.25, 0.5, 0.75, 1.0])
     with pytest.raises(ls.LayerstackError):
         angle_grid(1)
+
+
+def test_polarized_outputs_average_to_natural_light():
+    stack = hirayama_stack()
+    th = np.array([10.0, 50.0, 80.0])
+    kw = dict(sigma_nm=25.0, tau_nm=300.0)
+    nat = coated_rough(stack, WL, th, th[::-1], 40.0, **kw)
+    pol = coated_rough(stack, WL, th, th[::-1], 40.0, polarized=True, **kw)
+    for a, b in zip(nat, pol):
+        assert b.shape == (3, 2, 4)
+        np.testing.assert_allclose(0.5 * (np.asarray(b)[:, 0] + np.asarray(b)[:, 1]), np.asarray(a), rtol=1e-14)
+    assert np.max(np.abs(np.asarray(pol.k_d)[:, 0] - np.asarray(pol.k_d)[:, 1])) > 1e-3  # s and p differ

@@ -269,3 +269,16 @@ def test_bad_input_is_rejected():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         he_torrance_brdf(wl, 10.0, 10.0, n_substrate=1.5, sigma_nm=50.0, tau_nm=300.0)
+
+
+def test_polarized_outputs_against_reference():
+    ti, tr, ph = 40.0, 20.0, 200.0
+    out = he_torrance_brdf(np.array([500.0]), ti, tr, ph, n_substrate=complex(3.9, 0.02), sigma_nm=30.0,
+                           tau_nm=300.0, polarized=True)
+    assert out.specular.shape == (2, 1)
+    nat = he_torrance_brdf(np.array([500.0]), ti, tr, ph, n_substrate=complex(3.9, 0.02), sigma_nm=30.0, tau_nm=300.0)
+    np.testing.assert_allclose(np.mean(np.asarray(out.directional_diffuse), axis=0), np.asarray(nat.directional_diffuse),
+                               rtol=1e-14)
+    spec, dd = ref_brdf(1.0, complex(3.9, 0.02), 500.0, *np.radians([ti, tr, ph]), 30.0, 300.0)
+    assert float(np.mean(out.specular)) == pytest.approx(spec, rel=1e-8)
+    assert float(out.specular[0, 0]) > float(out.specular[1, 0])  # s above p off normal

@@ -64,6 +64,7 @@ GGX / Beckmann, geometric optics, no σ0/λ dependence). Neither is the other's 
 from __future__ import annotations
 
 import math
+import warnings
 from typing import NamedTuple
 
 import equinox as eqx
@@ -77,7 +78,7 @@ from ._he_torrance import (SHADOWING_FORMS, _check_angles_deg, auto_terms, check
                            specular_attenuation)
 from ._response import natural
 from ._stack import ResolvedStack, Stack, Substrate, resolve
-from ._validate import LayerstackError, check_finite, check_unit_interval, is_concrete
+from ._validate import LayerstackError, LayerstackWarning, check_finite, check_unit_interval, is_concrete
 
 __all__ = ["CoatedRough", "coated_rough", "FORMS", "PREFACTORS", "check_coated_stack", "rough_specular",
            "rough_diffuse"]
@@ -215,6 +216,14 @@ def check_coated_stack(stack: Stack) -> None:
             raise LayerstackError(f"coated_rough: layers[{i}] ({layer.name or 'unnamed'}) must be coherent (a thin film)")
 
 
+def warn_absorbing_neighbour(stack: Stack, n_next) -> None:
+    """Warn when the film next to the rough object absorbs: the He–Torrance terms are defined in
+    a transparent medium and are evaluated with its real index (module docstring)."""
+    if stack.layers and is_concrete(n_next) and np.any(np.imag(np.asarray(n_next)) > 0):
+        warnings.warn(f"layers[{len(stack.layers) - 1}] next to the rough object absorbs: the He-Torrance terms use "
+                      "its real index only", LayerstackWarning, stacklevel=3)
+
+
 def check_options(form, prefactor, shadowing_form):
     if form not in FORMS:
         raise LayerstackError(f"form must be one of {FORMS}, got {form!r}")
@@ -278,7 +287,9 @@ def coated_rough(
     check_roughness(sigma_nm, tau_nm)
     check_unit_interval("uniform_albedo", uniform_albedo)
     wl = jnp.asarray(wavelength_nm)
-    n_terms = auto_terms(sigma_nm, wl, resolve(stack, wl).n[-2], n_terms)
+    n_next = resolve(stack, wl).n[-2]
+    warn_absorbing_neighbour(stack, n_next)
+    n_terms = auto_terms(sigma_nm, wl, n_next, n_terms)
     return _coated_rough_core(stack, wl, jnp.asarray(incidence_deg), jnp.asarray(viewing_deg),
                               jnp.asarray(azimuth_deg), jnp.asarray(sigma_nm), jnp.asarray(tau_nm),
                               jnp.asarray(uniform_albedo), n_terms, form, prefactor, shadowing_form, bool(polarized))

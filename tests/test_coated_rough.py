@@ -22,6 +22,7 @@ from test_he_torrance import ref_D, ref_shadow, ref_sigma
 
 import layerstack_jax as ls
 from layerstack_jax._coated_rough import coated_rough
+from layerstack_jax._he_torrance import he_torrance_brdf
 from layerstack_jax._render_tables import (CoatingTables, angle_grid, coating_tables, interpolate_k_d, interpolate_k_r,
                                            interpolate_k_t)
 
@@ -184,14 +185,11 @@ def test_grazing_viewing_radiometric_vanishes_literal_does_not():
 def test_bare_object_both_forms_are_he_torrance():
     stack = ls.Stack(ambient=1.0, layers=[], exit=ls.Substrate(ls.Index(ALUMINIUM.real, ALUMINIUM.imag)))
     kw = dict(sigma_nm=30.0, tau_nm=300.0)
-    ht = ls_he = None
-    from layerstack_jax._he_torrance import he_torrance_brdf
     ht = he_torrance_brdf(WL, 35.0, 50.0, 20.0, n_substrate=ALUMINIUM, **kw)
     for form in ("radiometric", "literal"):
         out = coated_rough(stack, WL, 35.0, 50.0, 20.0, form=form, **kw)
         np.testing.assert_allclose(np.asarray(out.k_d), np.asarray(ht.directional_diffuse), rtol=1e-12)
         np.testing.assert_allclose(np.asarray(out.k_r), np.asarray(ht.specular), rtol=1e-12)
-    del ls_he
 
 
 def test_roughness_lowers_the_specular_reflectance_of_the_coating():
@@ -244,6 +242,9 @@ def test_bad_input_is_rejected():
         coated_rough(single_film(), WL, 0.0, 0.0, sigma_nm=10.0, tau_nm=300.0, form="x")
     with pytest.raises(ls.LayerstackError, match="sigma_nm"):
         coated_rough(single_film(), WL, 0.0, 0.0, sigma_nm=-1.0, tau_nm=300.0)
+    with pytest.warns(ls.LayerstackWarning, match="absorbs"):
+        coated_rough(ls.Stack(ambient=1.0, layers=[ls.Layer(ls.Index(1.4, 0.1), 50.0)], exit=ls.Substrate(ALUMINIUM)),
+                     WL, 0.0, 0.0, sigma_nm=10.0, tau_nm=300.0)
 
 
 # ----------------------------------------------------------------------------- tables

@@ -18,13 +18,19 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.py"))
+# minutes of table building and Monte-Carlo rendering: run by `make test-slow`; the plugin itself
+# is tested in the default run (tests/test_render_mitsuba.py, tests/test_render_lookup.py)
+SLOW = {"07_rendering_coated_objects"}
 
 
 def test_notebooks_found():
     assert NOTEBOOKS, "no notebooks/NN_*.py found"
 
 
-@pytest.mark.parametrize("script", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+@pytest.mark.parametrize(
+    "script", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW else p for p in NOTEBOOKS],
+    ids=[p.stem for p in NOTEBOOKS],
+)
 def test_notebook_runs(script, tmp_path):
     env = dict(os.environ)
     env["MPLBACKEND"] = "Agg"

@@ -31,7 +31,7 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import HOST_METHODS, SolverOptions, bound_note, compiled_fit, finish_on_bounds, starting_point
+from ._solve import HOST_METHODS, SolverOptions, bound_note, compiled_fit, settle_on_bounds, starting_point
 from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
 from ._status import CONVERGED, INVALID_DATA, result_message
 
@@ -54,7 +54,7 @@ class BatchResult:
             sigma_origin: ``"given"``, ``"estimated from residuals"`` or ``"default 1 — χ² not
             meaningful"``;
         at_bound: ``(N, P)`` components on a bound; finished_on_bound: ``(N,)`` fits of an
-            unconstrained method finished by L-BFGS-B on a bound;
+            unconstrained method settled on an optimal bound (:func:`fitting._solve.settle_on_bounds`);
         invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
         wall_time_s: wall-clock time of the batch, seconds.
         results: with ``fit_batch(..., full_results=True)``, one :class:`~fitting.FitResult` per
@@ -106,8 +106,8 @@ class BatchResult:
         for i, msg in list(self.invalid_data.items())[:5]:
             lines.append(f"    fit {i}: {msg}")
         if self.finished_on_bound is not None and self.finished_on_bound.any():
-            lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) reached a bound: {self.method} stalled there and "
-                         "L-BFGS-B finished them (bounds kept exactly)")
+            lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) converged on a bound ({self.method} stopped "
+                         "there before its own tolerance; the bound is optimal)")
         if self.at_bound is not None and self.at_bound.any():
             per = self.at_bound.sum(axis=0)
             lines.append("  on a bound: " + ", ".join(f"{nm} in {k} fit(s)" for nm, k in zip(self.names, per) if k))
@@ -198,7 +198,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     A fit whose data fail the objective's checks (NaN, a negative reflectance …) is not made:
     it is flagged in its own row (status ``INVALID_DATA``, NaN values, the reason in
     ``invalid_data``) and the others are fitted as usual. A fit of an unconstrained method that
-    stalls on a bound is finished by L-BFGS-B (``finished_on_bound``), as in :func:`~fitting.fit`.
+    stops on an optimal bound is converged there (``finished_on_bound``), as in :func:`~fitting.fit`.
     The statistics are those of :func:`~fitting.fit` (:func:`fitting._statistics.fit_statistics`):
     the same numbers for the same data.
 
@@ -240,7 +240,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             report(min((c + 1) * chunk, n), n)
     out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
     args = (tuple(np.asarray(y)[:n] for y in ys), tuple(np.asarray(w)[:n] for w in ws))
-    out, finished = finish_on_bounds(objective, o, out, args)
+    out, finished = settle_on_bounds(objective, o, out)
     layout = objective.layout
     stats = fit_statistics(out.jacobian, out.x, out.residuals, layout, objective.n_points,
                            sigma_given=objective.sigma_given, scale_covariance=scale_covariance, rank_rtol=rank_rtol)

@@ -16,9 +16,10 @@ L-BFGS-B driver (:mod:`fitting._bounded`).
   Single fits and multi-start (one host solve per start); not for :func:`~fitting.fit_batch`.
 
 The unconstrained solvers (``lm``, ``gauss-newton``, ``dogleg``, ``bfgs``) work on transformed
-coordinates that only approach a bound. When one of them ends at its step limit with a
-parameter on a bound, the fit is finished by the bounded L-BFGS-B from that point, and the
-result says so (:attr:`FitResult.note`); a minimum on a bound is then reported as converged.
+coordinates that only approach a bound, so their step test cannot be met there. When one of
+them stops unconverged with a parameter on a bound, the bound's optimality is checked
+(:func:`settle_on_bounds`, Karush–Kuhn–Tucker): if it holds, the fit is converged on the bound,
+the parameter put exactly on it, and the result says so (:attr:`FitResult.note`).
 
 Each objective compiles one solve function per method and options (cached on the objective);
 data travel in ``args``, so later fits with other data — and batched fits, multi-start — reuse it.
@@ -48,7 +49,7 @@ from ._status import CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_mes
 
 __all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
            "RoundoffTrustRegion", "compiled_fit", "result_message", "multistart_points", "starting_point",
-           "finish_on_bounds", "fit"]
+           "settle_on_bounds", "fit"]
 
 METHODS = ("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb", "trf")
 #: Methods run on the host (scipy), one fit at a time.
@@ -375,39 +376,42 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     return run_all
 
 
-def finish_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, args) -> tuple[FitOutput, np.ndarray]:
-    """Fits of an unconstrained method that ended unconverged (step limit, or a failed step)
-    with a parameter on a bound (the transforms only approach it), finished by the bounded
-    L-BFGS-B from where they stopped, the parameters in contact put on their bound.
+def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput) -> tuple[FitOutput, np.ndarray]:
+    r"""Fits of an unconstrained method that ended unconverged (step limit, or a failed step)
+    with parameters on a bound, checked for optimality on that bound (Karush–Kuhn–Tucker):
+    the gradient of :math:`\tfrac12\|r\|^2` presses each such parameter against its bound,
+    and the Gauss–Newton step of the other parameters is below :math:`\sqrt{\mathrm{rtol}}`
+    of their (scaled) values. Those fits are converged — the transformed coordinates of these
+    solvers only approach a bound, so their own step test cannot be met there — and their
+    parameters in contact are put exactly on the bound.
 
-    ``out``: NumPy :class:`FitOutput` with a leading axis of fits, ``args`` the same fits'
-    data. Returns the updated output (steps of both solves added) and the ``(N,)`` mask of the
-    fits finished so; fits of other methods, and other fits, are returned unchanged."""
-    x, status = np.asarray(out.x), np.asarray(out.status)
+    ``out``: NumPy :class:`FitOutput` with a leading axis of fits. Returns the updated output
+    and the ``(N,)`` mask of the fits settled so; other methods and fits are unchanged."""
+    x, status = np.asarray(out.x, float), np.asarray(out.status)
     n = x.shape[0]
     if o.method not in _TRANSFORMED:
         return out, np.zeros(n, bool)
     layout = objective.layout
     lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale)
-    finite = np.all(np.isfinite(x), axis=-1)
-    stalled = (status != CONVERGED) & finite & (lo | hi).any(axis=-1)
-    if not stalled.any():
-        return out, stalled
-    idx = np.nonzero(stalled)[0]
-    ob = dataclasses.replace(o, method="lbfgsb")
-    # start on the bound itself: L-BFGS-B then checks the bound's optimality (projected gradient)
-    x0 = np.where(lo, layout.lower, np.where(hi, layout.upper, np.clip(x, layout.lower, layout.upper)))
-    z0 = x0[idx] / layout.scale
-    sub = jax.tree.map(lambda a: jnp.asarray(a)[idx], args)
-    new = jax.tree.map(np.asarray, compiled_fit(objective, ob, batched=True)(jnp.asarray(z0), sub, objective.optics))
-    new = new._replace(num_steps=np.asarray(out.num_steps)[idx] + new.num_steps)
-
-    def put(a, b):
-        a = np.array(a, copy=True)
-        a[idx] = b
-        return a
-
-    return jax.tree.map(put, out, new), stalled
+    active = lo | hi
+    candidate = (status != CONVERGED) & np.all(np.isfinite(x), axis=-1) & active.any(axis=-1)
+    if not candidate.any():
+        return out, candidate
+    J = np.asarray(out.jacobian, float)  # (N, M, P) w.r.t. z = x / scale
+    r = np.concatenate([np.asarray(a, float).reshape(n, -1) for a in out.residuals]
+                       + [np.asarray(out.penalty, float).reshape(n, -1)], axis=-1)
+    with np.errstate(invalid="ignore"):
+        g = np.einsum("nmp,nm->np", J, r)
+        pressed = np.where(lo, g >= 0, np.where(hi, g <= 0, True)).all(axis=-1)
+        free_J = np.where(active[:, None, :], 0.0, np.nan_to_num(J))
+        step = -np.einsum("npm,nm->np", np.linalg.pinv(free_J), np.nan_to_num(r))
+        z = x / layout.scale
+        small = (np.abs(step) <= np.sqrt(o.rtol) * np.maximum(np.abs(z), 1.0)).all(axis=-1)
+    settled = candidate & pressed & small
+    if not settled.any():
+        return out, settled
+    x_new = np.where(settled[:, None] & lo, layout.lower, np.where(settled[:, None] & hi, layout.upper, x))
+    return out._replace(x=x_new, status=np.where(settled, CONVERGED, status)), settled
 
 
 def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarray:
@@ -434,12 +438,13 @@ def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarra
     return pts
 
 
-def bound_note(method: str, names: list, switched: bool) -> str:
-    """The result's note when a fit of ``method`` was finished by L-BFGS-B."""
-    if not switched:
+def bound_note(method: str, names: list, settled: bool) -> str:
+    """The result's note when a fit of ``method`` was settled on a bound."""
+    if not settled:
         return ""
-    return (f"{method} did not converge with {', '.join(names)} on a bound (its transformed coordinates "
-            "only approach a bound); finished by the bounded L-BFGS-B from there, bounds kept exactly")
+    return (f"{method} stopped before its own tolerance with {', '.join(names)} on a bound (its transformed "
+            "coordinates only approach a bound); the bound is optimal there (the gradient presses against it, the "
+            "other parameters have converged): converged on the bound")
 
 
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
@@ -452,8 +457,8 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         method: ``"lm"`` (default), ``"gauss-newton"``, ``"dogleg"``, ``"bfgs"``, ``"lbfgsb"``
             (bounds kept exactly; for optima on a bound) or ``"trf"`` (scipy's bounded
             trust-region least squares on the host; bounds kept exactly; large joint fits).
-            An unconstrained method that stalls on a bound is finished by L-BFGS-B (the
-            result's ``note`` says so).
+            An unconstrained method that stops on a bound where the bound is optimal is
+            converged there (the result's ``note`` says so, :func:`settle_on_bounds`).
         data: optional replacement spectra (one ``(samples, wl)`` array per dataset): fits
             other data with the same compiled solver.
         x0: optional physical starting vector ``(P,)`` (default: from the parameters / stack).
@@ -488,7 +493,7 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         outs = jax.tree.map(lambda a: np.asarray(a)[None], one)
     else:
         outs = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics))
-    outs, switched = finish_on_bounds(objective, o, outs, bargs)
+    outs, switched = settle_on_bounds(objective, o, outs)
     n_starts_converged = None
     best = 0
     if starts > 1:

@@ -31,7 +31,13 @@ Leaves that are not batched stay constants of the compiled function (critical an
 quadrature segments are laid out once); when only thick-layer thicknesses, α and ρg are
 batched, the Fresnel algebra (:func:`~layerstack_jax.fixed_optics`) is computed once, not per
 spectrum. Inside ``jax.jit``/``jax.grad`` (traced leaves) the same ``lax.map`` runs in the
-caller's trace and a JAX array is returned.
+caller's trace and a JAX array is returned. With Dask arrays among the leaves, :func:`predict`
+returns a lazy Dask array, one task per block of the batch, computed on whatever scheduler is
+active (threads, processes, a ``distributed.Client``): each worker process compiles once per
+structure (the cache above) and runs this same chunked loop on its block.
+
+Leaves are checked by the stack's own constructors: a Dask leaf is read once there (its
+non-negativity check), so very large batches should come as NumPy arrays (or memmaps).
 """
 
 from __future__ import annotations

@@ -13,6 +13,8 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   identifiability, report, JSON, plot);
 * :mod:`fitting._batch` — :func:`fit_batch` (many independent fits in one compiled, chunked,
   vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ));
+* :mod:`fitting._cube` — :func:`fit_cube`: every pixel of a hyperspectral cube, out of core,
+  resumable, on Dask (local or a cluster), maps written to zarr;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
   thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
@@ -31,6 +33,8 @@ from ._batch import BatchResult as BatchResult
 from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
+from ._cube import STATUS as CUBE_STATUS
+from ._cube import fit_cube as fit_cube
 from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult
 from ._design import NeedleScan as NeedleScan
@@ -73,6 +77,8 @@ __all__ = [
     "background_rho_g",
     "calibration_series",
     "fit_batch",
+    "fit_cube",
+    "CUBE_STATUS",
     "Dataset",
     "Objective",
     "resample",

@@ -11,6 +11,7 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
+from ._batched import predict as predict
 from ._colour import OBSERVERS as OBSERVERS
 from ._colour import VISIBLE_RANGE_NM as VISIBLE_RANGE_NM
 from ._colour import ColourSpace as ColourSpace
@@ -19,6 +20,13 @@ from ._colour import delta_e_ab as delta_e_ab
 from ._colour import srgb_encode as srgb_encode
 from ._colour import xyz_to_lab as xyz_to_lab
 from ._colour import xyz_to_xyy as xyz_to_xyy
+from ._cubes import as_cube as as_cube
+from ._cubes import open_cube as open_cube
+from ._cubes import read_envi as read_envi
+from ._cubes import read_netcdf as read_netcdf
+from ._cubes import read_npy as read_npy
+from ._cubes import read_zarr as read_zarr
+from ._cubes import write_zarr_cube as write_zarr_cube
 from ._database import DatabaseFormula as DatabaseFormula
 from ._database import database_version as database_version
 from ._database import material as material

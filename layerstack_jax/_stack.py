@@ -221,7 +221,8 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
     d, alpha = [], []
     for i, layer in enumerate(stack.layers):
         label = f"layers[{i}] ({layer.name or 'unnamed'})"
-        d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", layer.thickness)))
+        d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", _on_grid(f"{label}: thickness (nm)",
+                                                                                     layer.thickness, wl))))
         a = None if layer.alpha is None else _on_grid(f"{label}: alpha (1/nm)", as_spectrum(layer.alpha, wl), wl)
         alpha.append(None if a is None else check_nonnegative(f"{label}: alpha (1/nm)", a))
     return ResolvedStack(
@@ -235,11 +236,15 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
 
 
 def _on_grid(name: str, x, wl):
-    """A spectrum given as an array must end on the wavelength axis: ``(..., wl)`` or ``(..., 1)``."""
+    """A per-wavelength leaf is a scalar, ``(1,)`` or ``(wl,)``; leading batch axes belong to
+    :func:`layerstack_jax.predict`, which maps over them in bounded memory."""
     shape = jnp.shape(x)
+    if len(shape) > 1:
+        raise LayerstackError(f"{name}: shape {shape} has batch axes: predict many spectra with "
+                              "layerstack_jax.predict(stack, wavelength_nm, geometry) (or jax.vmap), not reflectance")
     if shape and shape[-1] not in (1, wl.shape[-1]):
-        raise LayerstackError(f"{name}: an array spectrum must have {wl.shape[-1]} values (one per wavelength) "
-                              f"on its last axis, got shape {shape}")
+        raise LayerstackError(f"{name}: an array must have {wl.shape[-1]} values (one per wavelength), got shape "
+                              f"{shape}; for a batch of samples use layerstack_jax.predict")
     return x
 
 

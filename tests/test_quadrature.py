@@ -327,21 +327,21 @@ def test_jit_and_eager_quadrature_layouts_agree():
 
 
 # ----------------------------------------------------------------------------------------------
-# segments beyond an evanescent thick medium (geometry._reach)
+# segments beyond an evanescent thick medium (_illumination._reach)
 # ----------------------------------------------------------------------------------------------
 def _full_and_pruned(st, wl, side, nodes=16):
     """Diffuse (r, t) joined over every packet at every node, and as pruned by the plan; the plan.
     Under jit with the stack closed over: its indices stay concrete, so the plan is static."""
-    from layerstack_jax import _geometry as G
+    from layerstack_jax import _illumination as G
 
-    plan = G._hemisphere(G.resolve(st, wl), side, nodes)[2]
+    plan = G.hemisphere(G.resolve(st, wl), side, nodes)[2]
 
     @jax.jit
     def both():
         rs = G.resolve(st, wl)
-        s, w, _ = G._hemisphere(rs, side, nodes)
+        s, w, _ = G.hemisphere(rs, side, nodes)
         interfaces = G.stack_interfaces(rs, s, both_sides=(side == "back"))
-        return G._diffuse_joined(rs, side, interfaces, w, None), G._diffuse_joined(rs, side, interfaces, w, plan)
+        return G.diffuse_joined(rs, side, interfaces, w, None), G.diffuse_joined(rs, side, interfaces, w, plan)
 
     return *both(), plan
 
@@ -379,7 +379,7 @@ def test_segments_beyond_an_evanescent_thick_medium_skip_the_layers_behind_it():
 def test_no_pruning_behind_an_absorbing_medium_or_under_jit():
     """A thick medium of complex index still takes power past its 'critical angle' (Re q > 0):
     no segment is cut there; with traced indices the layout is not static: no plan at all."""
-    from layerstack_jax import _geometry as G
+    from layerstack_jax import _illumination as G
 
     # from 1.6: air 0.39 (no T beyond), 1.4 + 1e-4i 0.77 (no cut), 1.5 0.88 (cut: only the
     # 1.6|1.4 interface and the 1.4 layer before the 1.4|1.5 one remain)
@@ -392,7 +392,7 @@ def test_no_pruning_behind_an_absorbing_medium_or_under_jit():
     def f(n):
         layers = [ls.Layer(1.5, 1e4, coherent=False), ls.Layer(ls.Index(n), 1e4, coherent=False)]
         rs = G.resolve(ls.Stack(1.0, layers, ls.Substrate(1.6)), jnp.array([550.0]))
-        plans.append(G._hemisphere(rs, "back", 8)[2])
+        plans.append(G.hemisphere(rs, "back", 8)[2])
         return 0.0
 
     jax.jit(f)(1.4)

@@ -12,6 +12,8 @@ interference-grade accuracy (see README, "Precision").
 """
 
 from ._batched import predict as predict
+from ._coated_rough import CoatedRough as CoatedRough
+from ._coated_rough import coated_rough as coated_rough
 from ._colour import OBSERVERS as OBSERVERS
 from ._colour import VISIBLE_RANGE_NM as VISIBLE_RANGE_NM
 from ._colour import ColourSpace as ColourSpace
@@ -40,6 +42,8 @@ from ._ellipsometry import psi_delta as psi_delta
 from ._ellipsometry import reflection_amplitudes as reflection_amplitudes
 from ._fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._fresnel import normal_wavevector as normal_wavevector
+from ._he_torrance import HeTorrance as HeTorrance
+from ._he_torrance import he_torrance_brdf as he_torrance_brdf
 from ._illumination import Diffuse as Diffuse
 from ._illumination import Response as Response
 from ._illumination import diffuse as diffuse
@@ -78,6 +82,11 @@ from ._polarimetry import polarized_brdf as polarized_brdf
 from ._polarimetry import specular_mueller as specular_mueller
 from ._polarimetry import stokes as stokes
 from ._quadrature import DEFAULT_NODES as DEFAULT_NODES
+from ._render_tables import CoatingTables as CoatingTables
+from ._render_tables import coating_tables as coating_tables
+from ._render_tables import interpolate_k_d as interpolate_k_d
+from ._render_tables import interpolate_k_r as interpolate_k_r
+from ._render_tables import interpolate_k_t as interpolate_k_t
 from ._quadrature import hemispherical_rule as hemispherical_rule
 from ._rough import RoughBRDF as RoughBRDF
 from ._rough import microfacet_distribution as microfacet_distribution

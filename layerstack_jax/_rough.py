@@ -1,4 +1,13 @@
-r"""Rough top surface, "locally smooth" (Hirayama et al. §4.2): a microfacet specular lobe.
+r"""Rough top surface, "locally smooth": a microfacet specular lobe over a conformal coating.
+
+Which model for which object. This module: a *conformal* coating that follows a rough surface
+whose facets are much larger than the wavelength, each facet carrying the whole stack
+(Cook–Torrance / GGX / Beckmann, geometric optics, no σ0/λ dependence).
+:func:`layerstack_jax.coated_rough` (:mod:`layerstack_jax._coated_rough`, Hirayama et al. §4.2,
+eqs. 8–17, with He–Torrance's rough boundary): a rough *object* under films whose boundaries
+stay flat (roughness heights σ0 ≲ λ, correlation lengths τ ~ λ, where wave effects — the
+e^{−g} specular loss growing as σ0/λ, the directional-diffuse lobe — matter); that is the
+paper's model. Neither is the other's limit.
 
 The top surface is made of microfacets much larger than the wavelength, each coated with the
 whole (locally smooth, planar) stack. Light reflected by a facet whose normal is the half vector

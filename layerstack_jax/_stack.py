@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._materials import Index, Material, Tabulated, as_material
-from ._validate import (LayerstackError, LayerstackWarning, check, check_nonnegative, check_positive, check_unit_interval,
-                        is_concrete, warn_if_implausible)
+from ._validate import (LayerstackError, LayerstackWarning, PendingChecks, check, check_nonnegative, check_positive,
+                        check_unit_interval, is_concrete, warn_if_implausible)
 
 __all__ = [
     "Layer",
@@ -167,10 +167,10 @@ class ResolvedStack(NamedTuple):
     wavelength: object
 
 
-def _check_index(name: str, n):
+def _check_index(name: str, n, **pending):
     """A medium's complex index n + ik, checked: finite, n > 0, k ≥ 0 (convention n + ik)."""
     return check(name, n, lambda a, xp: ~xp.isfinite(a) | (xp.real(a) <= 0) | (xp.imag(a) < 0),
-                 "must have n > 0 and k >= 0 (convention n + ik)")
+                 "must have n > 0 and k >= 0 (convention n + ik)", **pending)
 
 
 def _warn_implausible(stack: Stack, wl, n: tuple) -> None:
@@ -206,27 +206,42 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
     wl = jnp.asarray(wavelength_nm) if not is_concrete(wavelength_nm) else np.asarray(wavelength_nm)
     if wl.ndim != 1:
         raise LayerstackError(f"wavelength_nm must be 1-D, got shape {wl.shape}")
-    wl = jnp.asarray(check_positive("wavelength_nm (nm)", wl))
+    checks = PendingChecks()  # traced checks: one runtime branch for the whole stack
+    wl = jnp.asarray(check_positive("wavelength_nm (nm)", wl, pending=checks, key=("wl",)))
     names = ("ambient index", *(f"layers[{i}] ({layer.name or 'unnamed'}): index" for i, layer in enumerate(stack.layers)),
              "exit index")
-    n = tuple(
-        _check_index(name, m(wl))  # numpy when concrete: lets static work (critical angles) happen at trace time
-        for name, m in zip(names, (stack.ambient, *(layer.index for layer in stack.layers), stack.exit.index))
-    )
+    n = [
+        _check_index(name, m(wl), pending=checks, key=("n", i))  # numpy when concrete: static work at trace time
+        for i, (name, m) in enumerate(zip(names, (stack.ambient, *(layer.index for layer in stack.layers),
+                                                   stack.exit.index)))
+    ]
     _warn_implausible(stack, wl, n)
     rho_g = None
     if isinstance(stack.exit, LambertianBackground):
         rho_g = _on_grid("background reflectance rho_g", as_spectrum(stack.exit.reflectance, wl), wl)
-        rho_g = check_unit_interval("background reflectance rho_g", rho_g)
+        rho_g = check_unit_interval("background reflectance rho_g", rho_g, pending=checks, key=("rho_g",))
     d, alpha = [], []
     for i, layer in enumerate(stack.layers):
         label = f"layers[{i}] ({layer.name or 'unnamed'})"
-        d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", _on_grid(f"{label}: thickness (nm)",
-                                                                                     layer.thickness, wl))))
+        h = _on_grid(f"{label}: thickness (nm)", layer.thickness, wl)
+        d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", h, pending=checks, key=("d", i))))
         a = None if layer.alpha is None else _on_grid(f"{label}: alpha (1/nm)", as_spectrum(layer.alpha, wl), wl)
-        alpha.append(None if a is None else check_nonnegative(f"{label}: alpha (1/nm)", a))
+        alpha.append(None if a is None else check_nonnegative(f"{label}: alpha (1/nm)", a, pending=checks, key=("alpha", i)))
+    attached = checks.attach()
+    if attached is not None:  # the first traced value carries every traced check
+        key, value = attached
+        if key[0] == "wl":
+            wl = value
+        elif key[0] == "n":
+            n[key[1]] = value
+        elif key[0] == "rho_g":
+            rho_g = value
+        elif key[0] == "d":
+            d[key[1]] = value
+        else:
+            alpha[key[1]] = value
     return ResolvedStack(
-        n=n,
+        n=tuple(n),
         d=tuple(d),
         alpha=tuple(alpha),
         coherent=stack.coherent,

@@ -16,7 +16,7 @@ mistake (µm given for nm, percent for a fraction).
 from __future__ import annotations
 
 import warnings
-from typing import Callable
+from typing import Callable, Optional
 
 import equinox as eqx
 import jax
@@ -28,6 +28,7 @@ __all__ = [
     "LayerstackWarning",
     "is_concrete",
     "check",
+    "PendingChecks",
     "check_finite",
     "check_nonnegative",
     "check_positive",
@@ -60,11 +61,39 @@ def _range_text(a: np.ndarray) -> str:
     return f"range [{np.nanmin(a)!r}, {np.nanmax(a)!r}]" if np.any(np.isfinite(a)) else "no finite value"
 
 
-def check(name: str, x, bad: Callable, what: str):
+class PendingChecks:
+    """Traced checks collected over one evaluation (e.g. every leaf of a stack in
+    :func:`~layerstack_jax._stack.resolve`) and raised by one ``equinox.branched_error_if``
+    attached to the first traced value checked — one runtime branch instead of one per leaf
+    (each costs a conditional in the compiled loop). That value is an input of the computation,
+    so the check cannot be removed as dead code."""
+
+    def __init__(self):
+        self.predicates: list = []
+        self.messages: list[str] = []
+        self.first = None  # (key, value) of the first traced value checked
+
+    def add(self, key, x, predicate, message: str) -> None:
+        if self.first is None:
+            self.first = (key, x)
+        self.predicates.append(predicate)
+        self.messages.append(message)
+
+    def attach(self):
+        """``(key, checked value)`` of the first traced value, or None when nothing was traced."""
+        if self.first is None:
+            return None
+        key, x = self.first
+        preds = jnp.stack(self.predicates)
+        return key, eqx.branched_error_if(x, jnp.any(preds), jnp.argmax(preds), tuple(self.messages))
+
+
+def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingChecks] = None, key=None):
     """``x``, checked: ``bad(a, xp)`` (``xp`` = numpy or jax.numpy) marks the invalid entries.
 
     Concrete ``x``: raises ``LayerstackError("<name> <what>, got <values>")`` if any entry is
-    bad. Traced ``x``: returns ``equinox.error_if(x, any(bad), "<name> <what>")``. None passes.
+    bad. Traced ``x``: returns ``equinox.error_if(x, any(bad), "<name> <what>")``, or, with
+    ``pending``, records the check there (under ``key``) and returns ``x`` unchanged. None passes.
     """
     if x is None:
         return None
@@ -74,27 +103,30 @@ def check(name: str, x, bad: Callable, what: str):
             raise LayerstackError(f"{name} {what}, got {_range_text(a)}")
         return x
     xj = jnp.asarray(x)
+    if pending is not None:
+        pending.add(key, xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
+        return xj
     return eqx.error_if(xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
 
 
-def check_finite(name: str, x):
+def check_finite(name: str, x, **pending):
     """``x`` with no NaN or infinite entry."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a), "must be finite (no NaN or infinity)")
+    return check(name, x, lambda a, xp: ~xp.isfinite(a), "must be finite (no NaN or infinity)", **pending)
 
 
-def check_nonnegative(name: str, x, what: str = "must be >= 0"):
+def check_nonnegative(name: str, x, what: str = "must be >= 0", **pending):
     """``x`` finite and ≥ 0 (thickness, α, k …)."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0), f"{what} and finite")
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0), f"{what} and finite", **pending)
 
 
-def check_positive(name: str, x, what: str = "must be > 0"):
+def check_positive(name: str, x, what: str = "must be > 0", **pending):
     """``x`` finite and > 0 (wavelengths, real parts of indices)."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a <= 0), f"{what} and finite")
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a <= 0), f"{what} and finite", **pending)
 
 
-def check_unit_interval(name: str, x):
+def check_unit_interval(name: str, x, **pending):
     """``x`` finite and in [0, 1] (ρg, fractions)."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0) | (a > 1), "must lie in [0, 1]")
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0) | (a > 1), "must lie in [0, 1]", **pending)
 
 
 def check_angle_deg(name: str, x, *, grazing: bool = False):

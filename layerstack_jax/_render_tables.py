@@ -62,7 +62,7 @@ class CoatingTables(NamedTuple):
     phi_out: np.ndarray
     cos_theta_out: np.ndarray
     k_d: np.ndarray
-    interpolation_error: float
+    interpolation_error: float = float("nan")
     interpolation_error_k_r: float = float("nan")
     interpolation_error_k_d: float = float("nan")
     absolute_error_k_r: float = float("nan")

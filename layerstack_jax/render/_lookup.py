@@ -54,6 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._render_tables import CoatingTables  # the one table type (re-exported here)
 from .._validate import LayerstackError
 
 __all__ = ["CoatingTables", "TableSurface", "DEFENSIVE"]
@@ -62,21 +63,6 @@ __all__ = ["CoatingTables", "TableSurface", "DEFENSIVE"]
 DEFENSIVE = 0.1
 
 _FIELDS = ("wavelength_nm", "cos_theta", "k_r", "k_t", "phi_out", "cos_theta_out", "k_d")
-
-
-class CoatingTables(NamedTuple):
-    """Reflectance tables of a coated surface (the contract of ``layerstack_jax._render_tables``;
-    any object with these attributes is accepted). Plain NumPy float64 arrays; shapes and units
-    in the module docstring."""
-
-    wavelength_nm: np.ndarray
-    cos_theta: np.ndarray
-    k_r: np.ndarray
-    k_t: np.ndarray
-    phi_out: np.ndarray
-    cos_theta_out: np.ndarray
-    k_d: np.ndarray
-    interpolation_error: float = float("nan")
 
 
 def _grid(name: str, x, lo: float, hi: float) -> np.ndarray:

@@ -60,33 +60,40 @@ def _mask(objective: Objective) -> tuple:
     return tuple(m) if m is not None else objective._mask
 
 
+#: Tail probability of the χ² distribution beyond which χ²/ν is called implausible.
+IMPLAUSIBLE_P = 1e-6
+
+
 def quality_verdict(reduced_chi2: float, dof: int, sigma_given: bool, s: float) -> tuple[str, list]:
     """Plain verdict on the fit quality: ``(verdict, warnings)``.
 
-    With σ given, χ²/ν of a correct model lies within 1 ± 5√(2/ν) but for a chance of about
-    1e-6; outside that band and beyond a factor 2, the fit is implausible: the model misses
-    the data (or σ is too small), resp. σ is too large. Without σ, the χ² computed with σ = 1
-    says nothing: the verdict states the σ estimated from the residuals, ``s``."""
+    With σ given, χ² of a correct model follows the χ² distribution with ν degrees of freedom:
+    a χ² in either tail beyond probability :data:`IMPLAUSIBLE_P` (and χ²/ν beyond 1.5, resp.
+    below 2/3) is implausible — the model misses the data (or σ is too small), resp. σ is too
+    large. Without σ, the χ² computed with σ = 1 says nothing: the verdict states the σ
+    estimated from the residuals, ``s``."""
+    from scipy.stats import chi2 as chi2_distribution
+
     if dof <= 0:
         return f"no degrees of freedom (ν = {dof}): χ² cannot judge the fit", [
-            f"{-dof + 0} more parameters than data points: the fit is underdetermined" if dof < 0 else
+            f"{-dof} more parameters than data points: the fit is underdetermined" if dof < 0 else
             "as many parameters as data points: nothing is left to judge the fit by"]
     if not sigma_given:
         return (f"no σ given: χ² with σ = 1 is not meaningful; σ estimated from the residuals "
                 f"s = {s:.3g} (ν = {dof})"), []
-    band = 5.0 * math.sqrt(2.0 / dof)
     text = f"χ²/ν = {reduced_chi2:.4g} with ν = {dof} degrees of freedom (σ given)"
     if not np.isfinite(reduced_chi2):
         return text, ["χ² is not finite: the fit failed"]
-    if reduced_chi2 > max(2.0, 1.0 + band):
+    chi2 = reduced_chi2 * dof
+    if reduced_chi2 > 1.5 and chi2_distribution.sf(chi2, dof) < IMPLAUSIBLE_P:
         return text + ": implausibly large", [
             f"χ²/ν = {reduced_chi2:.4g} ≫ 1: the model does not describe the data within the given σ "
             f"(or σ is underestimated by a factor ~{math.sqrt(reduced_chi2):.3g}); the standard errors, "
             "computed from the given σ, are then too small"]
-    if reduced_chi2 < min(0.5, 1.0 - band):
+    if reduced_chi2 < 2.0 / 3.0 and chi2_distribution.cdf(chi2, dof) < IMPLAUSIBLE_P:
         return text + ": implausibly small", [
-            f"χ²/ν = {reduced_chi2:.4g} ≪ 1: the given σ is larger than the scatter of the data "
-            f"(overestimated by a factor ~{1 / math.sqrt(max(reduced_chi2, 1e-300)):.3g}); the standard errors "
+            f"χ²/ν = {reduced_chi2:.4g} ≪ 1: the data scatter far less than the given σ (σ overestimated by a "
+            f"factor ~{1 / math.sqrt(max(reduced_chi2, 1e-300)):.3g}, or noise-free data); the standard errors "
             "are then too large"]
     return text + ": consistent with the noise", []
 

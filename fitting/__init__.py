@@ -9,6 +9,9 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   :class:`Objective` (weighted residuals model − data);
 * :mod:`fitting._solve` — :func:`fit` (optimistix Levenberg–Marquardt by default; Gauss–Newton,
   Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start);
+* :mod:`fitting._statistics` — the one computation of χ², covariance, standard errors,
+  correlations and identifiability, used by every fit; :mod:`fitting._bounded` — the one
+  L-BFGS-B driver shared by fit and design; :mod:`fitting._status` — result codes and messages;
 * :mod:`fitting._results` — :class:`FitResult` (values, standard errors, covariance,
   identifiability, report, JSON, plot);
 * :mod:`fitting._batch` — :func:`fit_batch` (many independent fits in one compiled, chunked,

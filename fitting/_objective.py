@@ -347,6 +347,11 @@ class Objective:
         return tuple(out)
 
     # ----------------------------------------------------------------- data
+    @property
+    def mask(self) -> tuple:
+        """Per dataset, the used points: boolean ``(samples, wl)`` on the model grid."""
+        return self._mask
+
     def args(self, data=None):
         """The data pytree passed to :meth:`residuals`: ``(data, weight)`` per dataset.
 

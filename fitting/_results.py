@@ -53,11 +53,8 @@ def _combination(groups: list[tuple[str, float]]) -> str:
 
 
 def _mask(objective: Objective) -> tuple:
-    """Used-point masks of the objective's datasets."""
-    # TODO(objective): a public ``Objective.mask`` (tuple of (samples, wl) bool arrays) is asked
-    # for; until it exists the private attribute is read here, in this one place.
-    m = getattr(objective, "mask", None)
-    return tuple(m) if m is not None else objective._mask
+    """Used-point masks of the objective's datasets (``Objective.mask``)."""
+    return tuple(objective.mask)
 
 
 #: Tail probability of the χ² distribution beyond which χ²/ν is called implausible.

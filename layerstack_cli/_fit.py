@@ -87,7 +87,8 @@ def _summary(results: list) -> list[str]:
             v, e = np.asarray(r.values[key]), np.asarray(r.stderr[key])
             params.append(f"{key} {float(v):.5g} ± {float(e):.2g}" if v.size == 1 else f"{key} [{v.size} values]")
         ok = "converged" if r.converged else "NOT converged"
-        lines.append(f"{name:>16}  {ok:13}  reduced chi2 {r.reduced_chi2:.3g}  " + "  ".join(params))
+        chi = f"chi2/nu {r.reduced_chi2:.3g}" if getattr(r, "sigma_given", False) else "chi2 n/a (no sigma)"
+        lines.append(f"{name:>16}  {ok:13}  {chi}  " + "  ".join(params))
     return lines
 
 
@@ -244,7 +245,7 @@ def _cmd_fit(args) -> int:
             except LayerstackError as e:
                 raise LayerstackError(f"{args.data}: {e}") from None
 
-        results = []
+        results, skipped = [], []
         if args.joint:
             obj = objective(Y)
             results.append(("+".join(names), fitting.fit(obj, args.method, starts=args.starts, max_steps=args.max_steps)))
@@ -255,7 +256,12 @@ def _cmd_fit(args) -> int:
             if args.starts == 1 and args.method not in fitting.HOST_METHODS:
                 # all columns in one compiled, vmapped solve
                 batch = fitting.fit_batch(obj, Y, args.method, max_steps=args.max_steps, full_results=True)
-                results.extend(zip(names, batch.results))
+                invalid = dict(getattr(batch, "invalid_data", None) or {})
+                for i, (name, r) in enumerate(zip(names, batch.results)):
+                    if r is None:  # this column's data failed the checks: flagged, the batch went on
+                        skipped.append((name, invalid.get(i, "invalid data")))
+                    else:
+                        results.append((name, r))
             else:  # multi-start or a host solver: one fit per column, one compiled solver for all
                 results.extend((name, fitting.fit(obj, args.method, data=[y[None]], starts=args.starts,
                                                   max_steps=args.max_steps)) for name, y in zip(names, Y))
@@ -268,9 +274,12 @@ def _cmd_fit(args) -> int:
     else:
         print("\n".join(_summary(results)))
         print(f"({len(results)} fits; --report all prints each fit's full report, the JSON holds them all)")
+    for name, why in skipped:
+        print(f"{PROG}: warning: column {name!r} not fitted: {why}")
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     payload = {
+        "skipped": [{"spectrum": n, "reason": str(w)} for n, w in skipped],
         "stack": str(args.stack),
         "data": str(args.data),
         "geometry": geometry.label,
@@ -283,9 +292,10 @@ def _cmd_fit(args) -> int:
     }
     out.write_text(json.dumps(payload, indent=1))
     n_ok = sum(r.converged for _, r in results)
-    print(f"{PROG}: wrote {out} ({len(results)} fit(s), {n_ok} converged) in {time.perf_counter() - start:.1f} s")
+    print(f"{PROG}: wrote {out} ({len(results)} fit(s), {n_ok} converged, {len(skipped)} not fitted) in "
+          f"{time.perf_counter() - start:.1f} s")
     if args.plot:
         plot = Path(args.plot)
         results[0][1].plot(plot, title=f"{Path(args.stack).name} — {geometry.label}")
         print(f"{PROG}: wrote {plot} (data vs fit{' of ' + results[0][0] if len(results) > 1 else ''})")
-    return 0 if n_ok == len(results) else 1
+    return 0 if n_ok == len(results) and not skipped else 1

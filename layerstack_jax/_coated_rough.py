@@ -165,7 +165,7 @@ def _down(rs, dirn: _Direction, eta):
 
 
 def _single_pass(rs, dirn: _Direction):
-    """:math:`\prod_j t_j e^{i\phi_j}` over the films (no multiple reflections), ``(2, *B, wl)``."""
+    r""":math:`\prod_j t_j e^{i\phi_j}` over the films (no multiple reflections), ``(2, *B, wl)``."""
     amp = jnp.prod(dirn.t[:, :-1], axis=1)
     if not rs.d:
         return jnp.broadcast_to(amp, (2, *jnp.broadcast_shapes(amp.shape[1:], rs.wavelength.shape)))

@@ -115,7 +115,12 @@ class Geometry(eqx.Module):
             check_optics(optics, rs, self, nodes)
             if background and self.reads_diffuse_light and optics.diffuse is None:
                 raise LayerstackError("optics were made for a stack over a substrate, this one has a background")
-        out = self.read(rs, optics, background)
+        try:
+            out = self.read(rs, optics, background)
+        except TypeError as e:  # leaves whose leading (batch) axes do not broadcast together
+            raise LayerstackError(f"the stack's leaves do not broadcast together ({e}); to predict many spectra "
+                                  "from leaves with batch axes use layerstack_jax.predict(stack, wavelength_nm, "
+                                  "geometry), which maps over them in bounded memory") from None
         return jnp.broadcast_to(out, out.shape[:-1] + rs.wavelength.shape[-1:])
 
     # -- how it prints and parses itself

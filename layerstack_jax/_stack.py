@@ -251,15 +251,11 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
 
 
 def _on_grid(name: str, x, wl):
-    """A per-wavelength leaf is a scalar, ``(1,)`` or ``(wl,)``; leading batch axes belong to
-    :func:`layerstack_jax.predict`, which maps over them in bounded memory."""
+    """A per-wavelength leaf ends on the wavelength axis: ``(..., 1)`` or ``(..., wl)``."""
     shape = jnp.shape(x)
-    if len(shape) > 1:
-        raise LayerstackError(f"{name}: shape {shape} has batch axes: predict many spectra with "
-                              "layerstack_jax.predict(stack, wavelength_nm, geometry) (or jax.vmap), not reflectance")
     if shape and shape[-1] not in (1, wl.shape[-1]):
-        raise LayerstackError(f"{name}: an array must have {wl.shape[-1]} values (one per wavelength), got shape "
-                              f"{shape}; for a batch of samples use layerstack_jax.predict")
+        raise LayerstackError(f"{name}: an array must have {wl.shape[-1]} values (one per wavelength) on its last "
+                              f"axis, got shape {shape}; for a batch of samples use layerstack_jax.predict")
     return x
 
 

@@ -116,12 +116,12 @@ def check_finite(name: str, x, **pending):
 
 def check_nonnegative(name: str, x, what: str = "must be >= 0", **pending):
     """``x`` finite and ≥ 0 (thickness, α, k …)."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0), f"{what} and finite", **pending)
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a < 0), f"{what} and finite (no NaN or infinity)", **pending)
 
 
 def check_positive(name: str, x, what: str = "must be > 0", **pending):
     """``x`` finite and > 0 (wavelengths, real parts of indices)."""
-    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a <= 0), f"{what} and finite", **pending)
+    return check(name, x, lambda a, xp: ~xp.isfinite(a) | (a <= 0), f"{what} and finite (no NaN or infinity)", **pending)
 
 
 def check_unit_interval(name: str, x, **pending):

@@ -82,4 +82,6 @@ def max_abs(a, b) -> float:
 
 #: jitted entry point (one compile per stack structure and array shapes; Python-float leaves of
 #: the stack are traced, so changing values never recompiles)
-specular_jit = jax.jit(ls.specular, static_argnames=("both_sides",))
+# angles in radians (ls.specular takes degrees; angle_rad= says radians)
+specular_jit = jax.jit(lambda st, wl, angle_rad, both_sides=True: ls.specular(st, wl, angle_rad=angle_rad, both_sides=both_sides),
+                       static_argnames=("both_sides",))

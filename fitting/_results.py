@@ -363,9 +363,11 @@ class FitResult:
         return text
 
     # ------------------------------------------------------------------- plot
-    def plot(self, path=None, title: str = ""):
+    def plot(self, path=None, title: str = "", sample_names=None):
         """Data (points) and fit (lines) per dataset with residuals below; returns the
-        matplotlib Figure (object API, Agg canvas) and writes a PNG when ``path`` is given."""
+        matplotlib Figure (object API, Agg canvas) and writes a PNG when ``path`` is given.
+        ``sample_names``: legend names of the samples (e.g. the data file's column names); the
+        y axis says what the geometry reads (reflectance, reflectance factor, BRDF (1/sr) …)."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
@@ -385,10 +387,11 @@ class FitResult:
                 y = self.data[k][s]  # NaN at masked points
                 top.plot(x, y, "o" if lab else ".", ms=6 if lab else 3, color=color, alpha=0.6)
                 top.plot(x, self.model[k][s], "x" if lab else "-", ms=8, lw=1.4, color=color,
-                         label=f"sample {s}" if rows > 1 else "fit")
+                         label=(str(sample_names[s]) if sample_names is not None and len(sample_names) == rows
+                                else f"sample {s}") if rows > 1 else "fit")
                 bottom.plot(x, self.residuals[k][s], "o-" if lab else "-", lw=1.0, color=color)
             top.set_title(ds.label, fontsize=10)
-            top.set_ylabel("CIELAB" if lab else "reflectance")
+            top.set_ylabel("CIELAB" if lab else ds.geometry.quantity_label)
             if lab:
                 bottom.set_xticks([0, 1, 2], ["L*", "a*", "b*"])
             top.grid(True, alpha=0.3)

@@ -296,6 +296,7 @@ def _cmd_fit(args) -> int:
           f"{time.perf_counter() - start:.1f} s")
     if args.plot:
         plot = Path(args.plot)
-        results[0][1].plot(plot, title=f"{Path(args.stack).name} — {geometry.label}")
+        results[0][1].plot(plot, title=f"{Path(args.stack).name} — {geometry.label}",
+                           sample_names=names if args.joint else None)
         print(f"{PROG}: wrote {plot} (data vs fit{' of ' + results[0][0] if len(results) > 1 else ''})")
     return 0 if n_ok == len(results) and not skipped else 1

@@ -177,7 +177,7 @@ def _warn_implausible(stack: Stack, wl, n: tuple) -> None:
     """Plausibility warnings on concrete inputs (issue: "implausible input gets a warning")."""
     warn_if_implausible("wavelength_nm", wl, lambda a: (a < 100) | (a > 50_000),
                         "outside 100 nm - 50 µm: wavelengths are in nm (µm given?)")
-    if not is_concrete(wl) or np.size(wl) < 2:
+    if not is_concrete(wl) or np.size(wl) < 5:  # a few wavelengths are points, not a spectrum that aliases
         return
     w = np.asarray(wl, float)
     step = float(np.max(np.diff(w)))

@@ -177,13 +177,13 @@ def _warn_implausible(stack: Stack, wl, n: tuple) -> None:
     """Plausibility warnings on concrete inputs (issue: "implausible input gets a warning")."""
     warn_if_implausible("wavelength_nm", wl, lambda a: (a < 100) | (a > 50_000),
                         "outside 100 nm - 50 µm: wavelengths are in nm (µm given?)")
-    if not is_concrete(wl) or np.size(wl) < 5:  # a few wavelengths are points, not a spectrum that aliases
+    if not is_concrete(wl):
         return
     w = np.asarray(wl, float)
-    step = float(np.max(np.diff(w)))
+    step = float(np.max(np.diff(w))) if w.size >= 5 else None  # a few points are not a spectrum that aliases
     for i, (layer, ni) in enumerate(zip(stack.layers, n[1:-1])):
         label = f"layers[{i}] ({layer.name or 'unnamed'})"
-        if layer.coherent and is_concrete((layer.thickness, ni)):
+        if layer.coherent and step is not None and is_concrete((layer.thickness, ni)):
             # interference fringes of period λ²/(2 n d) in wavelength; fewer than 2 grid points
             # per fringe and the computed spectrum aliases (float32 and float64 then disagree)
             optical = 2.0 * np.max(np.real(np.asarray(ni))) * np.max(np.asarray(layer.thickness, float))

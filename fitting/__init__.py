@@ -36,7 +36,7 @@ from ._batch import BatchResult as BatchResult
 from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
-from ._cube import STATUS as CUBE_STATUS
+from ._cube import CUBE_STATUS as CUBE_STATUS
 from ._cube import fit_cube as fit_cube
 from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult

@@ -19,7 +19,7 @@ fitting — and writes maps into a zarr store, region by region:
   compiled solver runs on the same padded shapes).
 * pixels are fitted only where the spectrum is usable: inside the user ``mask``, finite at every
   band the dataset uses, below ``saturation`` and not negative. The others get NaN values and a
-  ``status`` code saying why (:data:`STATUS`).
+  ``status`` code saying why (:data:`CUBE_STATUS`).
 * maps: one per free parameter component (its name in :attr:`fitting.BatchResult.names`,
   made safe for zarr), its standard error (``<name>_stderr``), ``chi2``, ``reduced_chi2``,
   ``num_steps``, ``converged``, ``result_code``, ``rank`` of the normalised Jacobian and
@@ -66,12 +66,12 @@ from ._batch import fit_batch
 from ._objective import Objective
 from ._results import linearised_covariance
 
-__all__ = ["fit_cube", "STATUS", "structural_degeneracy", "rank_at_start", "cube_regions"]
+__all__ = ["fit_cube", "CUBE_STATUS", "structural_degeneracy", "rank_at_start", "cube_regions"]
 
 log = logging.getLogger("fitting.cube")
 
-#: ``status`` codes of the maps.
-STATUS = {
+#: ``status`` codes of the pixel maps of :func:`fit_cube` (dimensionless integers).
+CUBE_STATUS = {
     -1: "not fitted yet",
     0: "fitted",
     1: "outside the mask",
@@ -139,7 +139,7 @@ class _Settings:
 
 
 def _pixel_status(block: np.ndarray, user_mask: Optional[np.ndarray], s: _Settings) -> np.ndarray:
-    """``status`` code of every pixel of a region block ``(ry, rx, wl)`` (:data:`STATUS`)."""
+    """``status`` code of every pixel of a region block ``(ry, rx, wl)`` (:data:`CUBE_STATUS`)."""
     used = block if s.used_bands is None else block[..., s.used_bands]
     status = np.zeros(block.shape[:2], np.int8)
     status[np.any(used < 0, axis=-1)] = 4
@@ -356,7 +356,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         :class:`xarray.Dataset` (lazy, opened from ``out``): maps ``(y, x)`` of every free
         parameter component (its own unit: nm, 1/nm, dimensionless) and ``<name>_stderr``,
         ``chi2``, ``reduced_chi2``, ``num_steps``, ``converged``, ``result_code``, ``rank``,
-        ``identifiable``, ``status`` (:data:`STATUS`); attributes name the parameters.
+        ``identifiable``, ``status`` (:data:`CUBE_STATUS`); attributes name the parameters.
     """
     import xarray as xr
 
@@ -393,7 +393,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
     fp = _fingerprint(objective, cube, chunk, method, chunk_size, saturation, mask, fit_opts)
     attrs = {"fit_cube_job": fp, "parameters": json.dumps(list(names)),
              "parameter_variables": json.dumps([_var(n) for n in names]), "method": method,
-             "status_codes": json.dumps({str(k): v for k, v in STATUS.items()}), "chunk": json.dumps(list(chunk)),
+             "status_codes": json.dumps({str(k): v for k, v in CUBE_STATUS.items()}), "chunk": json.dumps(list(chunk)),
              "source": str(cube.attrs.get("source", "array"))}
     existing = Path(out).exists()
     if existing and resume:

@@ -22,7 +22,7 @@ pytest.importorskip("dask")
 
 import fitting  # noqa: E402
 import layerstack_jax as ls  # noqa: E402
-from fitting._cube import STATUS, fit_cube  # noqa: E402
+from fitting._cube import CUBE_STATUS, fit_cube  # noqa: E402
 from layerstack_jax._batched import predict  # noqa: E402
 from layerstack_jax._cubes import as_cube, open_cube, read_envi, read_npy, read_zarr, write_zarr_cube  # noqa: E402
 
@@ -126,7 +126,7 @@ def test_fit_cube_equals_fit_batch_and_marks_unusable_pixels(local_run):
     expected = np.zeros((NY, NX), np.int8)
     expected[1, 2], expected[3, 0], expected[5, 1], expected[4, 4] = 2, 3, 4, 1
     np.testing.assert_array_equal(status, expected)
-    assert set(np.unique(status)) <= set(STATUS)
+    assert set(np.unique(status)) <= set(CUBE_STATUS)
     ok = status == 0
     assert np.all(np.isnan(maps["thickness_film"].values[~ok])) and np.all(maps["num_steps"].values[~ok] == -1)
     b = fitting.fit_batch(_objective(), CUBE[ok], chunk_size=8)

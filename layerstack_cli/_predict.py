@@ -38,7 +38,7 @@ def _add_predict_parser(sub) -> None:
                    "illumination, B the analyser, s or p), or 'mueller' for its 16 Mueller elements "
                    "(columns GEOM_mIJ)")
     p.add_argument("--ellipsometry", action="append", type=float, metavar="ANGLE",
-                   help="also write psi_ANGLE and delta_ANGLE (degrees; Delta in (-180, 180], tmm's + 180) "
+                   help="also write psi_ANGLE and delta_ANGLE (degrees; Delta as instruments report it, 180 - tmm's Delta, in (-180, 180]) "
                    "of a coherent stack; repeat for several angles")
     p.set_defaults(func=_cmd_predict)
 

@@ -149,10 +149,12 @@ class Measurement(eqx.Module):
         return self.values[:, 1]
 
     def rho(self) -> np.ndarray:
-        r""":math:`\rho = \tan\psi\, e^{i\Delta}`, complex ``(ang, wl)`` (free of Δ's 360° ambiguity)."""
+        r""":math:`\rho = r_p/r_s = \tan\psi\, e^{-i\Delta}` in the library's exp(−iωt), n + ik
+        physics — the same number as ``layerstack_jax.ellipsometry(...).rho`` for the same ψ, Δ
+        (Δ as instruments report it); complex ``(ang, wl)``, free of Δ's 360° ambiguity."""
         self._require("psi_delta", "rho()")
         psi, delta = np.deg2rad(self.values[:, 0]), np.deg2rad(self.values[:, 1])
-        return np.tan(psi) * np.exp(1j * delta)
+        return np.tan(psi) * np.exp(-1j * delta)
 
     def depolarization(self, *, tolerance_deg: float = 1e-6) -> np.ndarray:
         """Depolarization as a fraction on the grid, ``(ang, wl)``, from the file's ``dPolE`` rows

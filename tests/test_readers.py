@@ -583,6 +583,7 @@ def test_measurement_views():
     psi, delta = np.deg2rad(m.psi_deg), np.deg2rad(m.delta_deg)
     np.testing.assert_allclose(np.abs(rho), np.tan(psi), rtol=1e-13)
     np.testing.assert_allclose(rho.real, np.tan(psi) * np.cos(delta), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rho.imag, -np.tan(psi) * np.sin(delta), rtol=1e-12, atol=1e-15)
     arrays = m.to_arrays()
     assert set(arrays) == {"wavelength_nm", "angles_deg", "psi", "delta", "sigma_psi", "sigma_delta"}
     np.testing.assert_array_equal(arrays["delta"], m.values[:, 1])
@@ -591,6 +592,19 @@ def test_measurement_views():
     one = m.at_angle(70.0)
     np.testing.assert_array_equal(one.values[0], m.values[2])
     assert one.extras is not m.extras and set(one.extras) == set(m.extras)
+
+
+def test_measurement_rho_is_the_models_rho():
+    """A ψ/Δ measurement made of the model's own ψ, Δ gives back the model's ρ = r_p/r_s (the two
+    conventions agree: no conjugate between a measured and a modelled ρ)."""
+    import layerstack_jax as ls
+
+    wl = np.linspace(400.0, 800.0, 5)
+    stack = ls.Stack(1.0, [ls.Layer(1.46, 120.0)], ls.Substrate(3.9 + 0.02j))
+    e = ls.ellipsometry(stack, wl, np.array([55.0, 70.0]))
+    m = Measurement(quantity="psi_delta", angles_deg=np.array([55.0, 70.0]), wavelength_nm=wl,
+                    values=np.stack([np.asarray(e.psi_deg), np.asarray(e.delta_deg)], axis=1))
+    np.testing.assert_allclose(m.rho(), np.asarray(e.rho), rtol=1e-12, atol=1e-15)
 
 
 def test_measurement_is_a_pytree_for_jit():

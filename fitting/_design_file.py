@@ -119,8 +119,8 @@ import numpy as np
 import layerstack_jax as ls
 from layerstack_jax._stack import resolve
 from layerstack_jax import LayerstackError
-from layerstack_jax.io import (FREE_KEYS, FileLocation, is_number, read_material, read_number, read_toml,
-                               reject_unknown_keys, stack_from_dict)
+from layerstack_jax.io import (FREE_KEYS, FileLocation, is_number, named_tables, read_material, read_number,
+                               read_toml, reject_unknown_keys, stack_from_dict)
 
 from ._design import (
     ColourTarget,
@@ -368,15 +368,12 @@ def _targets(source: str, d: Mapping) -> tuple:
     top = FileLocation(source, "top level")
     if raw is None:
         raise top.error("missing: add at least one [[targets]] table (what the design should achieve)", "targets")
-    if not isinstance(raw, list) or not raw or not all(isinstance(t, Mapping) for t in raw):
+    if isinstance(raw, list) and not raw:
         raise top.error("must be an array of tables, written [[targets]]", "targets")
     out = []
-    for i, t in enumerate(raw):
-        name = t.get("name", f"target {i + 1}")
-        label = f"[[targets]] no. {i + 1}"
-        if not isinstance(name, str) or not name:
-            raise FileLocation(source, label).error(f"must be a non-empty string, got {name!r}", "name")
-        where = FileLocation(source, f"{label} ({name!r})" if "name" in t else label)
+    for i, (t, name, where) in enumerate(named_tables(source, raw, "targets", "target")):
+        if "name" not in t:  # an unnamed target is called by its number alone
+            where = FileLocation(source, f"[[targets]] no. {i + 1}")
         kind = t.get("type", "spectral")
         if kind == "spectral":
             out.append(_spectral_target(where, t, name))

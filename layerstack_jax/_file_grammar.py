@@ -20,7 +20,7 @@ import numpy as np
 
 from ._validate import LayerstackError
 
-__all__ = ["FileLocation", "reject_unknown_keys", "is_number", "read_number", "read_number_list", "check_grid",
+__all__ = ["FileLocation", "named_tables", "reject_unknown_keys", "is_number", "read_number", "read_number_list", "check_grid",
            "check_range", "read_toml"]
 
 
@@ -107,3 +107,20 @@ def read_toml(path: Path, what: str = "stack file") -> dict:
         raise LayerstackError(f"{path}: invalid TOML: {e}") from None
     except (OSError, UnicodeDecodeError) as e:
         raise LayerstackError(f"{path}: cannot read {what}: {e}") from None
+
+
+def named_tables(source: str, raw, key: str, what: str) -> list[tuple[Mapping, str, FileLocation]]:
+    """The entries of an array of tables ``[[key]]`` (``raw``, from the parsed file) as
+    ``(table, name, where)``: ``name`` from the table's ``name`` key (default ``"<what> N"``),
+    ``where`` the :class:`FileLocation` that names it in messages. A non-list, a non-table entry
+    or an empty / non-string name raises :class:`LayerstackError`."""
+    if not isinstance(raw, list) or not all(isinstance(t, Mapping) for t in raw):
+        raise FileLocation(source, "top level").error(f"must be an array of tables, written [[{key}]]", key)
+    out = []
+    for i, t in enumerate(raw):
+        name = t.get("name", f"{what} {i + 1}")
+        label = f"[[{key}]] no. {i + 1}"
+        if not isinstance(name, str) or not name:
+            raise FileLocation(source, label).error(f"must be a non-empty string, got {name!r}", "name")
+        out.append((t, name, FileLocation(source, f"{label} ({name!r})")))
+    return out

@@ -14,8 +14,8 @@ from typing import Mapping, NamedTuple, Optional
 
 import numpy as np
 
-from ._file_grammar import (FileLocation, check_grid, check_range, is_number, read_number, read_number_list,
-                            read_toml, reject_unknown_keys)
+from ._file_grammar import (FileLocation, check_grid, check_range, is_number, named_tables, read_number,
+                            read_number_list, read_toml, reject_unknown_keys)
 from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
 from ._spectra_csv import read_csv_columns
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
@@ -336,16 +336,8 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
         else:
             ambient = Index(1.0)
 
-        raw_layers = d.get("layers", [])
-        if not isinstance(raw_layers, list) or not all(isinstance(t, Mapping) for t in raw_layers):
-            raise top.error("must be an array of tables, written [[layers]]", "layers")
-        layers = []
-        for i, t in enumerate(raw_layers):
-            name = t.get("name", f"layer {i + 1}")
-            label = f"[[layers]] no. {i + 1}"
-            if not isinstance(name, str) or not name:
-                raise FileLocation(source, label).error(f"must be a non-empty string, got {name!r}", "name")
-            layers.append(_layer(FileLocation(source, f"{label} ({name!r})"), t, base_dir, name, i, free))
+        layers = [_layer(where, t, base_dir, name, i, free)
+                  for i, (t, name, where) in enumerate(named_tables(source, d.get("layers", []), "layers", "layer"))]
 
         has_sub, has_bg = "substrate" in d, "background" in d
         if has_sub and has_bg:

@@ -110,6 +110,7 @@ from ._file_grammar import FileLocation as FileLocation
 from ._file_grammar import check_grid as check_grid
 from ._file_grammar import check_range as check_range
 from ._file_grammar import is_number as is_number
+from ._file_grammar import named_tables as named_tables
 from ._file_grammar import read_number as read_number
 from ._file_grammar import read_number_list as read_number_list
 from ._file_grammar import read_toml as read_toml
@@ -151,6 +152,7 @@ __all__ = [
     "parse_wavelengths",
     "FREE_KEYS",
     "FileLocation",
+    "named_tables",
     "reject_unknown_keys",
     "is_number",
     "read_number",

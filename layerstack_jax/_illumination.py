@@ -24,7 +24,7 @@ from ._custom_types import Array, Float, RealLike
 from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
 from ._response import Interfaces, natural, stack_interfaces, stack_intensities, thick_layer_parameters, thick_media
 from ._stack import ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, check_angle_deg, is_concrete
+from ._validate import LayerstackError, check_angle_deg, is_concrete, warn_if_implausible
 
 __all__ = ["Response", "Diffuse", "snell_invariant", "specular", "diffuse", "diffuse_resolved", "natural_T_front",
            "hemisphere"]
@@ -104,6 +104,10 @@ def specular(stack: Stack, wavelength_nm, angle_deg: Optional[RealLike] = None, 
         raise LayerstackError("specular: give angle_deg or angle_rad, not both")
     if angle_rad is not None:
         angle_deg = jnp.rad2deg(jnp.asarray(angle_rad)) if not is_concrete(angle_rad) else np.rad2deg(np.asarray(angle_rad, float))
+    else:  # until 0.1 the third argument was radians: a value that reads like one is called out
+        warn_if_implausible("specular: angle_deg", angle_deg,
+                            lambda a: (np.max(a) > 0) & (np.max(a) <= np.pi / 2) & np.any(a != np.round(a)),
+                            "all within (0, pi/2] and not whole degrees: radians given? pass angle_rad= for radians")
     angle_deg = check_angle_deg("specular: angle of incidence (angle_deg)", 0.0 if angle_deg is None else angle_deg,
                                 grazing=True)
     rs = resolve(stack, wavelength_nm)

@@ -111,6 +111,12 @@ def test_row3_specular_angles_are_degrees():
         ls.specular(film, wl, 95.0)
     with pytest.raises(ls.LayerstackError, match="not both"):
         ls.specular(film, wl, 45.0, angle_rad=0.5)
+    # code written for the old radian argument is called out, not silently computed at 0.785°
+    with pytest.warns(ls.LayerstackWarning, match="radians given"):
+        ls.specular(film, wl, np.pi / 4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ls.specular(film, wl, np.array([0.0, 1.0, 45.0]))  # whole degrees: no warning
     for g in (lambda: ls.Sphere(90.0), lambda: ls.Directional(45.0, -5.0), lambda: ls.Specular(120.0)):
         with pytest.raises(ls.LayerstackError, match=r"must lie in \[0, 90\) degrees"):
             g()
@@ -162,8 +168,7 @@ def test_row7_slightly_negative_readings_are_data():
                        [ft.thickness("varnish")])
     assert obj is not None
     with pytest.raises(ls.LayerstackError, match="below -5 sigma"):
-        ft.Dataset(ls.Sphere(8.0), y - 0.05, sigma=0.002) and ft.Objective(
-            _varnish(), WL, ft.Dataset(ls.Sphere(8.0), y - 0.05, sigma=0.002), [ft.thickness("varnish")])
+        ft.Objective(_varnish(), WL, ft.Dataset(ls.Sphere(8.0), y - 0.05, sigma=0.002), [ft.thickness("varnish")])
 
 
 # ---------------------------------------------------- row 11: wrong-length spectra

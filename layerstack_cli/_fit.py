@@ -183,31 +183,31 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
     return 0 if result.converged else 1
 
 
-def _is_spectra_csv(path) -> bool:
-    from layerstack_jax.io import sniff_format
+def _read_spectra(path):
+    """``(wavelength_nm, columns)`` when ``path`` is a spectra CSV (``wavelength_nm`` then one
+    column per spectrum), else None (an instrument file); the file is read once."""
+    from layerstack_jax.io import read_spectra_csv, sniff_format
 
     if sniff_format(path) != "csv":
-        return False
-    from layerstack_jax.io import read_spectra_csv
-
+        return None
     try:
-        read_spectra_csv(path)
+        return read_spectra_csv(path)
     except LayerstackError:
-        return False
-    return True
+        return None
 
 
 def _cmd_fit(args) -> int:
     import json
 
-    from layerstack_jax.io import read_measurement, read_spectra_csv
+    from layerstack_jax.io import read_measurement
 
     start = time.perf_counter()
     if not Path(args.data).is_file():
         raise LayerstackError(f"{args.data}: file not found")
-    if not _is_spectra_csv(args.data):
+    spectra = _read_spectra(args.data)
+    if spectra is None:
         return _cmd_fit_measurement(args, read_measurement(args.data), start)
-    data_wl, columns = read_spectra_csv(args.data)
+    data_wl, columns = spectra
     geometry, geometry_origin = _geometry(args, [n for n in columns if n != args.background])
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
     with _precision(args.float32):

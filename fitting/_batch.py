@@ -54,7 +54,9 @@ class BatchResult:
             sigma_origin: ``"given"``, ``"estimated from residuals"`` or ``"default 1 — χ² not
             meaningful"``;
         at_bound: ``(N, P)`` components on a bound; finished_on_bound: ``(N,)`` fits of an
-            unconstrained method settled on an optimal bound (:func:`fitting._solve.settle_on_bounds`);
+            unconstrained method settled on an optimal bound, finished_with_lbfgsb: ``(N,)`` fits
+            it ended on a bound that is not optimal, finished by L-BFGS-B
+            (:func:`fitting._solve.settle_on_bounds`);
         invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
         wall_time_s: wall-clock time of the batch, seconds.
         results: with ``fit_batch(..., full_results=True)``, one :class:`~fitting.FitResult` per
@@ -85,6 +87,7 @@ class BatchResult:
     unresolved: Optional[np.ndarray] = None
     at_bound: Optional[np.ndarray] = None
     finished_on_bound: Optional[np.ndarray] = None
+    finished_with_lbfgsb: Optional[np.ndarray] = None
     invalid_data: dict = dataclasses.field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -106,8 +109,11 @@ class BatchResult:
         for i, msg in list(self.invalid_data.items())[:5]:
             lines.append(f"    fit {i}: {msg}")
         if self.finished_on_bound is not None and self.finished_on_bound.any():
-            lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) converged on a bound ({self.method} stopped "
-                         "there before its own tolerance; the bound is optimal)")
+            lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) converged on a bound ({self.method} held the "
+                         "parameter there; the bound is optimal)")
+        if self.finished_with_lbfgsb is not None and self.finished_with_lbfgsb.any():
+            lines.append(f"  {int(self.finished_with_lbfgsb.sum())} fit(s) finished with L-BFGS-B ({self.method} reached "
+                         "a bound that is not optimal there)")
         if self.at_bound is not None and self.at_bound.any():
             per = self.at_bound.sum(axis=0)
             lines.append("  on a bound: " + ", ".join(f"{nm} in {k} fit(s)" for nm, k in zip(self.names, per) if k))
@@ -240,7 +246,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             report(min((c + 1) * chunk, n), n)
     out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
     args = (tuple(np.asarray(y)[:n] for y in ys), tuple(np.asarray(w)[:n] for w in ws))
-    out, finished = settle_on_bounds(objective, o, out)
+    out, settled, finished = settle_on_bounds(objective, o, out, args)
     layout = objective.layout
     stats = fit_statistics(out.jacobian, out.x, out.residuals, layout, objective.n_points,
                            sigma_given=objective.sigma_given, scale_covariance=scale_covariance, rank_rtol=rank_rtol)
@@ -253,7 +259,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             names = [nm for nm, b in zip(layout.names, lo[k] | hi[k]) if b]
             full[i] = build_result(objective, o, row, jax.tree.map(lambda a: a[k], args),
                                    scale_covariance=scale_covariance, rank_rtol=rank_rtol,
-                                   note=bound_note(method, names, bool(finished[k])), stats=_row(stats, k))
+                                   note=bound_note(method, names, bool(settled[k]), bool(finished[k])),
+                                   stats=_row(stats, k))
 
     def spread(a, fill):  # rows of the fits made -> all N rows
         a = np.asarray(a)
@@ -270,7 +277,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         spread(stats.reduced_chi2, np.nan), spread(stats.rank, layout.size),
         stats.sigma_origin not in (SIGMA_GIVEN, SIGMA_DEFAULT), time.perf_counter() - start_time, full,
         dof=stats.dof, sigma_origin=stats.sigma_origin, unresolved=spread(stats.unresolved, False),
-        at_bound=spread(lo | hi, False), finished_on_bound=spread(finished, False), invalid_data=invalid,
+        at_bound=spread(lo | hi, False), finished_on_bound=spread(settled, False),
+        finished_with_lbfgsb=spread(finished, False), invalid_data=invalid,
     )
 
 

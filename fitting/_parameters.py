@@ -56,6 +56,9 @@ __all__ = [
 ]
 
 LayerRef = Union[int, str]
+#: Fraction of the range (or scale) by which a start on a bound is moved inside it.
+_NUDGE = 1e-3
+
 _KINDS = ("thickness", "alpha", "rho_g", "n", "coefficient", "other")
 # default bounds by kind (PHYSICS conventions: thickness >= 0, 0 <= rho_g <= 1, alpha >= 0, n >= 1)
 _DEFAULT_BOUNDS = {
@@ -568,18 +571,19 @@ class Layout:
 
     def to_unconstrained(self, x) -> np.ndarray:
         """Inverse of :meth:`to_physical` (numpy); values on a bound are nudged inside by
-        1e-9 of the range or scale."""
+        1e-3 of the range or scale — beyond the 1e-4 within which a solve holds a component on
+        its bound (:func:`fitting._solve.hold_on_bounds`), so a start on a bound may leave it."""
         x = np.asarray(x, dtype=float)
         u = np.zeros_like(x)
         lo, hi, s = self.lower, self.upper, self.scale
         b, lw, hg, fr = self.both, self.low, self.high, self.free
         if b.size:
-            t = np.clip((x[..., b] - lo[b]) / (hi[b] - lo[b]), 1e-9, 1 - 1e-9)
+            t = np.clip((x[..., b] - lo[b]) / (hi[b] - lo[b]), _NUDGE, 1 - _NUDGE)
             u[..., b] = np.log(t) - np.log1p(-t)
         if lw.size:
-            u[..., lw] = np.log(np.maximum((x[..., lw] - lo[lw]) / s[lw], 1e-9))
+            u[..., lw] = np.log(np.maximum((x[..., lw] - lo[lw]) / s[lw], _NUDGE))
         if hg.size:
-            u[..., hg] = np.log(np.maximum((hi[hg] - x[..., hg]) / s[hg], 1e-9))
+            u[..., hg] = np.log(np.maximum((hi[hg] - x[..., hg]) / s[hg], _NUDGE))
         if fr.size:
             u[..., fr] = x[..., fr] / s[fr]
         return u

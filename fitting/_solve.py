@@ -16,10 +16,15 @@ L-BFGS-B driver (:mod:`fitting._bounded`).
   Single fits and multi-start (one host solve per start); not for :func:`~fitting.fit_batch`.
 
 The unconstrained solvers (``lm``, ``gauss-newton``, ``dogleg``, ``bfgs``) work on transformed
-coordinates that only approach a bound, so their step test cannot be met there. When one of
-them stops unconverged with a parameter on a bound, the bound's optimality is checked
-(:func:`settle_on_bounds`, Karush–Kuhn–Tucker): if it holds, the fit is converged on the bound,
-the parameter put exactly on it, and the result says so (:attr:`FitResult.note`).
+coordinates that only approach a bound, so their step test could never be met on it. Inside
+their solves a component that comes within 1e-4 of its scale of a finite bound is held exactly
+on that bound (:func:`hold_on_bounds`, an active set): its derivative is zero there, so the
+solver's own step test ends the solve once the other parameters have converged — a few steps,
+not ``max_steps``. Afterwards (:func:`settle_on_bounds`) the bound's optimality is checked
+(Karush–Kuhn–Tucker: the gradient presses against the bound): if it holds, the fit is converged
+on the bound and the result says so (:attr:`FitResult.note`); if it does not (the bound was
+reached on the way, or the solver failed there), the fit is finished from that point with
+L-BFGS-B, which keeps bounds exactly, and the note says so.
 
 Each objective compiles one solve function per method and options (cached on the objective);
 data travel in ``args``, so later fits with other data — and batched fits, multi-start — reuse it.
@@ -198,7 +203,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
     solver = _optx_solver(o)
 
     def residuals(u, args_optics):
-        return objective.residuals(layout.to_physical(u), *args_optics)
+        return objective.residuals(hold_on_bounds(layout, layout.to_physical(u)), *args_optics)
 
     # Least squares: optimistix linearises the residuals at every step and then materialises
     # and transposes that linear map several times (QR of the damped system, gradient, trust
@@ -212,10 +217,32 @@ def _solve_function(objective: Objective, o: SolverOptions):
                                 max_steps=o.max_steps, throw=False)
         else:
             sol = optx.least_squares(fn, solver, u0, args=(args, optics), max_steps=o.max_steps, throw=False)
-        x = layout.to_physical(sol.value)
+        x = hold_on_bounds(layout, layout.to_physical(sol.value))
         return x, sol.stats["num_steps"], _status(sol.result, x)
 
     return solve
+
+
+#: A component of an unconstrained solve within this fraction of its scale of a finite bound is
+#: held on the bound. Closer than that the cost is flat at round-off level for the usual
+#: parameters (α·h ≲ 1e-4 of an absorbance, ρg to 1e-4): a transformed coordinate would crawl
+#: towards the bound for tens of steps. Where the optimum is in fact that close to the bound
+#: but inside, the bound fails the optimality check and L-BFGS-B finishes the fit.
+HOLD_RTOL = 1e-4
+
+
+def hold_on_bounds(layout, x):
+    """Physical ``x`` ``(P,)`` with each component in contact with a finite bound (within
+    :data:`HOLD_RTOL` of its scale, :func:`fitting._statistics.bound_contacts`) put exactly on
+    that bound.
+
+    Used on the iterates of the unconstrained solvers: the held component's derivative is zero,
+    so the solver stops moving it (an active set) instead of chasing a bound its transformed
+    coordinate only approaches; the solver's step test then ends the solve. Whether the bound
+    is optimal is checked afterwards (:func:`settle_on_bounds`)."""
+    lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale, rtol=HOLD_RTOL, xp=jnp)
+    lower, upper = (jnp.asarray(b, dtype=x.dtype) for b in (layout.lower, layout.upper))
+    return jnp.where(lo, lower, jnp.where(hi, upper, x))
 
 
 def dense_jacobian(fn):
@@ -376,27 +403,35 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     return run_all
 
 
-def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput) -> tuple[FitOutput, np.ndarray]:
-    r"""Fits of an unconstrained method that ended unconverged (step limit, or a failed step)
-    with parameters on a bound, checked for optimality on that bound (Karush–Kuhn–Tucker):
-    the gradient of :math:`\tfrac12\|r\|^2` presses each such parameter against its bound,
-    and the Gauss–Newton step of the other parameters is below :math:`\sqrt{\mathrm{rtol}}`
-    of their (scaled) values. Those fits are converged — the transformed coordinates of these
-    solvers only approach a bound, so their own step test cannot be met there — and their
-    parameters in contact are put exactly on the bound.
+def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, args) -> tuple[FitOutput, np.ndarray, np.ndarray]:
+    r"""Fits of an unconstrained method that ended with parameters on a bound, checked for
+    optimality there (Karush–Kuhn–Tucker): the gradient of :math:`\tfrac12\|r\|^2` presses
+    each such parameter against its bound, and — unless the solver met its own step test with
+    them held (:func:`hold_on_bounds`) — the Gauss–Newton step of the other parameters is below
+    :math:`\sqrt{\mathrm{rtol}}` of their (scaled) values.
 
-    ``out``: NumPy :class:`FitOutput` with a leading axis of fits. Returns the updated output
-    and the ``(N,)`` mask of the fits settled so; other methods and fits are unchanged."""
+    * Where it holds the fit is converged on the bound, its parameters in contact exactly on it.
+    * Where it does not and the solver ended converged or failed (the bound was reached on the
+      way, or a step failed there), the fit is finished from that point by L-BFGS-B
+      (:func:`fitting._bounded.compiled_lbfgsb`, bounds kept exactly): its output replaces the
+      row; its steps are added to the first solver's.
+    * A fit stopped by ``max_steps`` away from an optimal bound stays as it is.
+
+    ``out``: NumPy :class:`FitOutput` with a leading axis of fits; ``args``: the fits' data
+    ``(spectra, weights)`` with the same leading axis. Returns the updated output, the ``(N,)``
+    mask of the fits settled on a bound and that of the fits finished by L-BFGS-B; other
+    methods and fits are unchanged."""
     x, status = np.asarray(out.x, float), np.asarray(out.status)
     n = x.shape[0]
+    none = np.zeros(n, bool)
     if o.method not in _TRANSFORMED:
-        return out, np.zeros(n, bool)
+        return out, none, none
     layout = objective.layout
     lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale)
     active = lo | hi
-    candidate = (status != CONVERGED) & np.all(np.isfinite(x), axis=-1) & active.any(axis=-1)
+    candidate = (status != NONFINITE) & np.all(np.isfinite(x), axis=-1) & active.any(axis=-1)
     if not candidate.any():
-        return out, candidate
+        return out, none, none
     J = np.asarray(out.jacobian, float)  # (N, M, P) w.r.t. z = x / scale
     r = np.concatenate([np.asarray(a, float).reshape(n, -1) for a in out.residuals]
                        + [np.asarray(out.penalty, float).reshape(n, -1)], axis=-1)
@@ -407,11 +442,32 @@ def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput) -> 
         step = -np.einsum("npm,nm->np", np.linalg.pinv(free_J), np.nan_to_num(r))
         z = x / layout.scale
         small = (np.abs(step) <= np.sqrt(o.rtol) * np.maximum(np.abs(z), 1.0)).all(axis=-1)
-    settled = candidate & pressed & small
-    if not settled.any():
-        return out, settled
-    x_new = np.where(settled[:, None] & lo, layout.lower, np.where(settled[:, None] & hi, layout.upper, x))
-    return out._replace(x=x_new, status=np.where(settled, CONVERGED, status)), settled
+    settled = candidate & pressed & (small | (status == CONVERGED))
+    x = np.where(settled[:, None] & lo, layout.lower, np.where(settled[:, None] & hi, layout.upper, x))
+    out = out._replace(x=x, status=np.where(settled, CONVERGED, status))
+    finish = candidate & ~settled & ((status == CONVERGED) | (status == FAILED))
+    if finish.any():
+        out = _finish_with_lbfgsb(objective, o, out, args, np.flatnonzero(finish))
+    return out, settled, finish
+
+
+def _finish_with_lbfgsb(objective: Objective, o: SolverOptions, out: FitOutput, args, rows) -> FitOutput:
+    """``out`` with its ``rows`` refitted by L-BFGS-B (same tolerances and step limit), each
+    started from its own solution; the steps of both solvers are added."""
+    layout = objective.layout
+    bounded = SolverOptions("lbfgsb", o.rtol, o.atol, o.gtol, o.max_steps)
+    start = np.clip(np.asarray(out.x, float)[rows], layout.lower, layout.upper)
+    sub = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[rows]), args)
+    new = jax.tree.map(np.asarray, compiled_fit(objective, bounded, batched=True)(
+        jnp.asarray(starting_point(objective, bounded, start)), sub, objective.optics))
+    new = new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
+
+    def put(a, b):
+        a = np.array(a, dtype=np.result_type(a, b))
+        a[rows] = b
+        return a
+
+    return jax.tree.map(put, out, new)
 
 
 def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarray:
@@ -438,13 +494,17 @@ def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarra
     return pts
 
 
-def bound_note(method: str, names: list, settled: bool) -> str:
-    """The result's note when a fit of ``method`` was settled on a bound."""
+def bound_note(method: str, names: list, settled: bool, finished: bool = False) -> str:
+    """The result's note when a fit of ``method`` was settled on a bound, or finished by
+    L-BFGS-B (:func:`settle_on_bounds`)."""
+    if finished:
+        return (f"{method} reached a bound that is not optimal there (the gradient pulls away from it, or a step "
+                "failed on it); the fit was finished from that point with L-BFGS-B (bounds kept exactly)")
     if not settled:
         return ""
-    return (f"{method} stopped before its own tolerance with {', '.join(names)} on a bound (its transformed "
-            "coordinates only approach a bound); the bound is optimal there (the gradient presses against it, the "
-            "other parameters have converged): converged on the bound")
+    return (f"{method} held {', '.join(names)} on a bound (its transformed coordinates only approach a bound); the "
+            "bound is optimal there (the gradient presses against it, the other parameters have converged): "
+            "converged on the bound")
 
 
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
@@ -457,8 +517,9 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         method: ``"lm"`` (default), ``"gauss-newton"``, ``"dogleg"``, ``"bfgs"``, ``"lbfgsb"``
             (bounds kept exactly; for optima on a bound) or ``"trf"`` (scipy's bounded
             trust-region least squares on the host; bounds kept exactly; large joint fits).
-            An unconstrained method that stops on a bound where the bound is optimal is
-            converged there (the result's ``note`` says so, :func:`settle_on_bounds`).
+            An unconstrained method holds a parameter that reaches a bound on it; where the
+            bound is optimal the fit is converged there, else it is finished by L-BFGS-B (the
+            result's ``note`` says which, :func:`settle_on_bounds`).
         data: optional replacement spectra (one ``(samples, wl)`` array per dataset): fits
             other data with the same compiled solver.
         x0: optional physical starting vector ``(P,)`` (default: from the parameters / stack).
@@ -493,7 +554,7 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         outs = jax.tree.map(lambda a: np.asarray(a)[None], one)
     else:
         outs = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics))
-    outs, switched = settle_on_bounds(objective, o, outs)
+    outs, settled, finished = settle_on_bounds(objective, o, outs, bargs)
     n_starts_converged = None
     best = 0
     if starts > 1:
@@ -506,4 +567,4 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                         starts=starts, starts_converged=n_starts_converged,
-                        note=bound_note(method, names, bool(switched[best])))
+                        note=bound_note(method, names, bool(settled[best]), bool(finished[best])))

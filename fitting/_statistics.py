@@ -186,11 +186,13 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
                          unresolved, zero, origin, bool(sigma_given))
 
 
-def bound_contacts(x, lower, upper, scale, rtol: float = 1e-6):
+def bound_contacts(x, lower, upper, scale, rtol: float = 1e-6, xp=np):
     """``(at_lower, at_upper)``, each ``(..., P)`` bool: components within ``rtol`` × scale of
     a finite bound (L-BFGS-B and TRF end exactly on a bound; the transforms of the
-    unconstrained solvers approach it exponentially)."""
-    x = np.asarray(x, float)
+    unconstrained solvers approach it exponentially, and their solves hold a component in
+    contact on its bound, :func:`fitting._solve.hold_on_bounds`). ``xp``: ``numpy`` (host) or
+    ``jax.numpy`` (inside a compiled solve)."""
+    x = np.asarray(x, float) if xp is np else x
     tol = rtol * np.asarray(scale, float)
     with np.errstate(invalid="ignore"):
         lo = np.isfinite(lower) & (x - lower <= tol)

@@ -464,10 +464,12 @@ class Objective:
                 out.append((jnp.sqrt(mu) * (v[..., 2:] - 2 * v[..., 1:-1] + v[..., :-2])).ravel())
         return jnp.concatenate(out) if out else jnp.zeros((0,), dtype=x.dtype)
 
-    def weighted_residuals(self, x, args, optics=None):
-        """Data residuals ``w (f − y)`` per dataset, ``(samples, wl)`` each (0 at masked points)."""
+    def weighted_residuals(self, x, args, optics=None, *, model=None):
+        """Data residuals ``w (f − y)`` per dataset, ``(samples, wl)`` each (0 at masked points).
+        ``model``: :meth:`predict` of ``x`` when the caller already has it."""
         data, weight = args
-        return tuple(w * (f - y) for f, y, w in zip(self.predict(x, optics), data, weight))
+        model = self.predict(x, optics) if model is None else model
+        return tuple(w * (f - y) for f, y, w in zip(model, data, weight))
 
     def residuals(self, x, args, optics=None):
         """Flat residual vector: weighted data residuals, then smoothness penalties."""

@@ -293,10 +293,9 @@ def _statistics_function(objective: Objective):
     scale = jnp.asarray(objective.layout.scale)
 
     def residuals_and_parts(z, args, optics):
-        data, weight = args
         x = z * scale
         model = objective.predict(x, optics)
-        res = tuple(w * (f - y) for f, y, w in zip(model, data, weight))
+        res = objective.weighted_residuals(x, args, optics, model=model)
         pen = objective.penalty(x)
         flat = jnp.concatenate([r.ravel() for r in res] + [pen])
         return flat, (model, res, pen)

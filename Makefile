@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test,readers,render,cube]'
+	$(PY) -m pip install -q -e '.[test,readers,render,cube,docs]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -42,7 +42,8 @@ notebooks: $(STAMP)
 	$(PY) notebooks/render.py
 
 docs: $(STAMP)
-	$(PY) docs/make_api.py
+	# the site from mkdocs.yml: pages under docs/, the API reference from the docstrings (mkdocstrings)
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict -d site
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .hypothesis
+	rm -rf $(VENV) out site .pytest_cache .hypothesis

@@ -51,6 +51,29 @@ def _parse_geometries(texts: list[str]) -> list[tuple[str, object]]:
     return columns
 
 
+def _resolve_geometry(given, stated, *, source: str, origin: str, silent: str):
+    """``(Geometry, origin text)`` of measured data: ``given`` (the ``-g`` text) if not None, else
+    the one geometry that every spelling in ``stated`` names (a CSV's column names such as
+    ``45/0``, a cube's ``geometry`` metadata), described by ``origin``. No silent default (it
+    would change the physics): otherwise a :class:`LayerstackError` naming ``source``, listing
+    the accepted spellings and saying why (``silent``, e.g. "the column names do not say")."""
+    from layerstack_jax import geometry_kinds
+
+    if given is not None:
+        return parse_geometry(given), "given (-g)"
+    found = set()
+    for text in stated:
+        try:
+            found.add(parse_geometry(text).label)
+        except LayerstackError:
+            found.add(None)
+    if len(found) == 1 and None not in found:
+        return parse_geometry(found.pop()), origin
+    spellings = ", ".join(k.spelling for k in geometry_kinds() if k.spelling)
+    raise LayerstackError(f"{source}: which geometry were these spectra measured in? give -g GEOM ({spellings}); "
+                          f"{silent}")
+
+
 def _describe(stack: Stack) -> str:
     """One-line summary of a stack for plot titles: ``air | SiO2 120 nm | substrate``."""
 

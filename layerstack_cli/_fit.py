@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, LayerstackError, parse_geometry
+from layerstack_jax import DEFAULT_NODES, LayerstackError
 from layerstack_jax.io import parse_wavelengths
 
-from ._common import PROG, _positive_int, _precision
+from ._common import PROG, _positive_int, _precision, _resolve_geometry
 
 def _add_fit_parser(sub) -> None:
     p = sub.add_parser(
@@ -50,26 +50,6 @@ def _add_fit_parser(sub) -> None:
     p.add_argument("--report", choices=("summary", "all"), default="summary",
                    help="with several spectra: one summary table (default) or every fit's full report")
     p.set_defaults(func=_cmd_fit)
-
-
-def _geometry(args, names: list[str]):
-    """The geometry of the data: ``-g``, else the data columns' names when each names the same
-    geometry (e.g. ``45/0``); no silent default (it would change the physics)."""
-    from layerstack_jax import geometry_kinds
-
-    if args.geometry is not None:
-        return parse_geometry(args.geometry), "given (-g)"
-    found = set()
-    for name in names:
-        try:
-            found.add(parse_geometry(name).label)
-        except LayerstackError:
-            found.add(None)
-    if len(found) == 1 and None not in found:
-        return parse_geometry(found.pop()), "from the data's column names"
-    spellings = ", ".join(k.spelling for k in geometry_kinds() if k.spelling)
-    raise LayerstackError(f"{args.data}: which geometry were these spectra measured in? give -g GEOM ({spellings}); "
-                          "the column names do not say")
 
 
 def _sigma_origin(args) -> str:
@@ -208,7 +188,9 @@ def _cmd_fit(args) -> int:
     if spectra is None:
         return _cmd_fit_measurement(args, read_measurement(args.data), start)
     data_wl, columns = spectra
-    geometry, geometry_origin = _geometry(args, [n for n in columns if n != args.background])
+    geometry, geometry_origin = _resolve_geometry(args.geometry, [n for n in columns if n != args.background],
+                                                  source=args.data, origin="from the data's column names",
+                                                  silent="the column names do not say")
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
     with _precision(args.float32):
         import fitting

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background
+from layerstack_jax._progress import reporter
 
 from ._objective import Dataset, Objective
 from ._parameters import alpha as alpha_parameter
@@ -132,27 +133,6 @@ class BatchResult:
         return "\n".join(lines)
 
 
-def _progress_callback(progress, n_chunks: int) -> Optional[Callable[[int, int], None]]:
-    """``progress``: a callback, True (a tqdm bar), False, or None (a bar when there are
-    several chunks)."""
-    if progress is False or (progress is None and n_chunks <= 1):
-        return None
-    if callable(progress):
-        return progress
-    from tqdm.auto import tqdm
-
-    bar = {}
-
-    def tq(done, total):
-        if "bar" not in bar:
-            bar["bar"] = tqdm(total=total, unit="fit", desc="fit_batch")
-        bar["bar"].update(done - bar["bar"].n)
-        if done >= total:
-            bar["bar"].close()
-
-    return tq
-
-
 def _rows(data, n):
     return [np.asarray(d)[n] for d in data]
 
@@ -236,14 +216,14 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)
-    report = _progress_callback(progress, n_chunks)
+    report = reporter(progress, n, desc="fit_batch", unit="fit", auto=n_chunks > 1)
     outs = []
     for c in range(n_chunks):
         sl = slice(c * chunk, (c + 1) * chunk)
         out = fn(y0, (tuple(y[sl] for y in ys), tuple(w[sl] for w in ws)), objective.optics)
         outs.append(jax.tree.map(np.asarray, out))
         if report is not None:
-            report(min((c + 1) * chunk, n), n)
+            report(min((c + 1) * chunk, n))
     out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
     args = (tuple(np.asarray(y)[:n] for y in ys), tuple(np.asarray(w)[:n] for w in ws))
     out, settled, finished = settle_on_bounds(objective, o, out, args)

@@ -46,10 +46,8 @@ import dataclasses
 import hashlib
 import json
 import logging
-import math
 import os
 import re
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -61,6 +59,7 @@ import numpy as np
 
 from layerstack_jax import LayerstackError
 from layerstack_jax._cubes import open_cube
+from layerstack_jax._progress import reporter
 
 from ._batch import fit_batch
 from ._objective import Objective
@@ -289,26 +288,6 @@ def _check_objective(objective: Objective, cube) -> Optional[np.ndarray]:
     return m if m.ndim == 1 and m.size == wl.size else None
 
 
-def _reporter(progress, total: int, initial: int):
-    if not progress:
-        return None
-    if callable(progress):
-        return progress
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:  # pragma: no cover - tqdm is in the 'cube' extra
-        return lambda done, tot: print(f"\rfit_cube: {done}/{tot} pixels", end="\n" if done >= tot else "",
-                                       file=sys.stderr, flush=True)
-    bar = tqdm(total=total, initial=initial, unit="px", desc="fit_cube", smoothing=0.05)
-
-    def update(done, tot):
-        bar.update(done - bar.n)
-        if done >= tot:
-            bar.close()
-
-    return update
-
-
 def _client(client, n_workers: int):
     """``(client, owned)`` for ``client`` = None / 'processes' / Client / address."""
     if client is None:
@@ -415,7 +394,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         log.info("fit_cube: resuming %s: %d of %d regions already written", out, len(regions) - len(pending), len(regions))
     settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
                          bool(jax.config.jax_enable_x64))
-    report = _reporter(progress, total, done_px)
+    report = reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
     t0 = time.perf_counter()
     done0 = done_px
 
@@ -427,7 +406,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         log.info("fit_cube: region %s: %d pixels (%d fitted) in %.3g s; %d/%d pixels, %.4g px/s, ETA %.0f s",
                  summary["region"], summary["pixels"], summary["fitted"], summary["seconds"], done_px, total, rate, eta)
         if report is not None:
-            report(done_px, total)
+            report(done_px)
 
     def block_of(ys, xs):
         return cube.isel(y=ys, x=xs), None if mask is None else mask[ys, xs]
@@ -456,6 +435,6 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             if cluster is not None:
                 cluster.close()
     if report is not None and not pending:
-        report(total, total)
+        report(total)
     log.info("fit_cube: %s complete (%d pixels) in %.3g s", out, total, time.perf_counter() - t_start)
     return xr.open_zarr(out, consolidated=False)

@@ -37,6 +37,7 @@ from jaxtyping import Array, Float
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
+from layerstack_jax._progress import reporter
 
 from ._bounded import BoundedSolution, compiled_lbfgsb, host_lbfgsb
 
@@ -515,11 +516,13 @@ def needle_design(
     def refine(st):
         return optimize_thicknesses(st, targets, bounds_nm=bounds_nm, maxiter=maxiter, method=method)
 
-    bar = _progress_bar(progress, iterations)
+    update = reporter(progress, iterations + 1, desc="needle design", unit="step")
+    step = 0
     try:
         result = start if start is not None else refine(stack)
         history = [{"layers": len(result.stack.layers), "merit": result.merit, "needle": None}]
-        _advance(bar, result, "refined start")
+        step += 1
+        _advance(update, step, result, "refined start")
         for _ in range(iterations):
             current = _drop_thin_layers(result.stack, min_thickness_nm)
             if max_layers is not None and len(current.layers) + 2 > max_layers:
@@ -533,11 +536,12 @@ def needle_design(
                 break
             result = refined
             history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": needle})
-            _advance(bar, result, "needle inserted")
+            step += 1
+            _advance(update, step, result, "needle inserted")
         result = _enforce_min_thickness(result, min_thickness_nm, refine, history)
     finally:
-        if bar is not None:
-            bar.close()
+        if update is not None:
+            update(iterations + 1)  # done (early stops included): the bar closes
     return result, history
 
 
@@ -557,18 +561,9 @@ def _enforce_min_thickness(result: DesignResult, min_nm: float, refine, history:
     return result
 
 
-def _progress_bar(progress: bool, iterations: int):
-    if not progress:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=iterations + 1, desc="needle design", unit="step")
-
-
-def _advance(bar, result: DesignResult, what: str) -> None:
-    if bar is not None:
-        bar.set_postfix_str(f"{what}: {len(result.stack.layers)} layers, merit {result.merit:.4g}")
-        bar.update(1)
+def _advance(update, step: int, result: DesignResult, what: str) -> None:
+    if update is not None:
+        update(step, f"{what}: {len(result.stack.layers)} layers, merit {result.merit:.4g}")
 
 
 # ------------------------------------------------------------------ tolerances and yield

@@ -43,8 +43,10 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from layerstack_jax import LayerstackError
+from layerstack_jax._progress import reporter
 
 from ._bounded import compiled_lbfgsb
 from ._objective import Objective
@@ -318,8 +320,10 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
     solve, then the statistics' ingredients at the solution, in one compiled function. When
     ``batched``, start and args carry a leading axis of fits, solved ``block`` at a time
     (vmapped) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
-    :attr:`Objective.optics`) is shared. Compiled once per objective, options and batching;
-    cached on the objective."""
+    :attr:`Objective.optics`) is shared. Where JAX sees several devices (accelerators, or CPU
+    devices made by ``XLA_FLAGS=--xla_force_host_platform_device_count``), each block's fits are
+    split over them (sharding of the fits' axis; the block is padded to a multiple of the device
+    count). Compiled once per objective, options and batching; cached on the objective."""
     key = ("fit", o, batched, block if batched else None)
     cache = _cache(objective)
     if key not in cache and o.method in HOST_METHODS:
@@ -333,14 +337,20 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
             return FitOutput(x, steps, status, *stats(x, args, optics))
 
         if batched:
+            devices = jax.devices()
+            k = len(devices)
+
             def run_all(starts, args, optics):
                 n = starts.shape[0]
-                b = min(block, n)
+                b = -(-min(block, n) // k) * k  # a multiple of the device count
                 pad = -n % b
                 nb = (n + pad) // b
                 blocks = jax.tree.map(  # (n_blocks, b, ...): the last block padded with copies of fit 0
                     lambda a: jnp.concatenate([a, jnp.broadcast_to(a[:1], (pad,) + a.shape[1:])]).reshape(
                         (nb, b) + a.shape[1:]), (starts, args))
+                if k > 1:  # each block's fits split over the devices (the solves are independent)
+                    split = NamedSharding(Mesh(np.asarray(devices), ("fits",)), PartitionSpec(None, "fits"))
+                    blocks = jax.lax.with_sharding_constraint(blocks, split)
                 out = jax.lax.map(jax.vmap(lambda sa: run(sa[0], sa[1], optics)), blocks)
                 return jax.tree.map(lambda a: a.reshape((nb * b,) + a.shape[2:])[:n], out)
 
@@ -493,6 +503,31 @@ def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarra
     return pts
 
 
+#: Starts solved per compiled call of a multi-start fit; progress is reported between calls.
+STARTS_PER_CALL = 16
+
+
+def _multistart(objective: Objective, o: SolverOptions, y0, bargs, progress) -> FitOutput:
+    """All starts ``y0`` ``(S, P)`` (solver coordinates) with their args, solved
+    :data:`STARTS_PER_CALL` at a time by one compiled batched solve (the last call padded with
+    copies of start 0: one compiled shape); ``progress`` as :func:`layerstack_jax._progress.reporter`
+    (by default a bar when there is more than one call). NumPy output, one row per start."""
+    n = y0.shape[0]
+    per = min(n, STARTS_PER_CALL)
+    calls = -(-n // per)
+    fn = compiled_fit(objective, o, batched=True)
+    update = reporter(progress, n, desc="multi-start", unit="start", auto=calls > 1)
+    outs = []
+    for c in range(calls):
+        rows = np.arange(c * per, (c + 1) * per)
+        rows = np.where(rows < n, rows, 0)
+        part = jax.tree.map(lambda a: a[rows], (y0, bargs))
+        outs.append(jax.tree.map(np.asarray, fn(*part, objective.optics)))
+        if update is not None:
+            update(min((c + 1) * per, n))
+    return jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
+
+
 def bound_note(method: str, names: list, settled: bool, finished: bool = False) -> str:
     """The result's note when a fit of ``method`` was settled on a bound, or finished by
     L-BFGS-B (:func:`settle_on_bounds`)."""
@@ -508,7 +543,7 @@ def bound_note(method: str, names: list, settled: bool, finished: bool = False) 
 
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
         max_steps: int = 256, rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9,
-        scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8):
+        scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None):
     """Fit ``objective`` and return a :class:`~fitting.FitResult`.
 
     Args:
@@ -523,13 +558,15 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             other data with the same compiled solver.
         x0: optional physical starting vector ``(P,)`` (default: from the parameters / stack).
         starts: multi-start: number of starting points (the first is ``x0``, the others drawn by
-            :func:`multistart_points`), solved in one vmapped call; the converged one with the
-            lowest χ² wins.
+            :func:`multistart_points`), solved 16 at a time by one compiled, vmapped solve; the
+            converged one with the lowest χ² wins.
         max_steps, rtol, atol, gtol: stopping rules (:class:`SolverOptions`).
         scale_covariance: scale the covariance by the reduced χ² (σ estimated from the
             residuals); default: True unless every dataset gives σ.
         rank_rtol: singular values of the normalised Jacobian below ``rank_rtol`` × the largest
             mark a non-identifiable combination.
+        progress: multi-start progress — True (a tqdm bar), False, a callable ``f(done,
+            total)``, or None (a bar when there are more than 16 starts).
 
     Never raises on non-convergence: see ``result.converged`` and ``result.reason``.
     ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
@@ -552,7 +589,7 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         one = compiled_fit(objective, o, batched=False)(y0[0], args, objective.optics)
         outs = jax.tree.map(lambda a: np.asarray(a)[None], one)
     else:
-        outs = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(y0, bargs, objective.optics))
+        outs = _multistart(objective, o, y0, bargs, progress)
     outs, settled, finished = settle_on_bounds(objective, o, outs, bargs)
     n_starts_converged = None
     best = 0

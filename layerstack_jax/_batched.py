@@ -46,7 +46,6 @@ import collections
 import hashlib
 import logging
 import math
-import sys
 import time
 from typing import Callable, NamedTuple, Optional, Union
 
@@ -56,6 +55,7 @@ import numpy as np
 
 from ._geometry import Geometry, fixed_optics, reflectance
 from ._quadrature import DEFAULT_NODES
+from ._progress import reporter
 from ._stack import LambertianBackground, Layer, Stack
 from ._validate import LayerstackError, is_concrete
 
@@ -267,28 +267,6 @@ def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int
     return fn
 
 
-def _progress(progress, total: int) -> Optional[Callable[[int], None]]:
-    """``update(done)`` for ``progress``: a callable ``f(done, total)``, True (tqdm bar, else
-    a line on stderr), or False/None (nothing)."""
-    if not progress:
-        return None
-    if callable(progress):
-        return lambda done: progress(done, total)
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:  # pragma: no cover - tqdm is in the 'cube' extra
-        return lambda done: print(f"\rpredict: {done}/{total} spectra", end="\n" if done >= total else "",
-                                  file=sys.stderr, flush=True)
-    bar = tqdm(total=total, unit="spectrum", desc="predict", smoothing=0.1)
-
-    def update(done):
-        bar.update(done - bar.n)
-        if done >= total:
-            bar.close()
-
-    return update
-
-
 def _rows(leaf, batch: tuple, core: tuple, flat_index: np.ndarray):
     """Rows ``flat_index`` of a batched leaf broadcast to ``(*batch, *core)``: ``(len, *core)``,
     copying only those rows (the broadcast itself is a view)."""
@@ -355,7 +333,7 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
     batched = [(leaf, core) for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b]
     first = tuple(_rows(leaf, batch, core, np.zeros(1, int)) for leaf, core in batched)
     fn = _compiled(stack, lay, wl, geometry, nodes, chunk, _optics_fixed_by(stack, lay.names, lay.batched), first)
-    update = _progress(n > 100_000 if progress is None else progress, n)
+    update = reporter(progress, n, desc="predict", unit="spectrum", auto=n > 100_000)
     t0 = time.perf_counter()
     flat_out = None
     for start in range(0, n, step):

@@ -18,6 +18,7 @@ import tmm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import fitting as ft
 import layerstack_jax as ls
 from layerstack_cli import main
 from layerstack_jax.io import read_spectra_csv, save_spectra_csv
@@ -248,3 +249,25 @@ def test_property_invalid_angles_raise_eager_and_jitted(angle):
     _raises_naming("angle", lambda: ls.specular(_FILM, WL, angle))
     _raises_naming("angle", lambda: _JITTED_ANGLE[0](angle))
     _raises_naming("incidence_deg", lambda: _JITTED_ANGLE[1](min(angle, 90.0)))
+
+
+# Objective: an invalid stack is refused when the objective is built; invalid parameter values
+# reaching its model under jit (a user's own jitted loop, not a solver, which keeps to the
+# bounds) raise naming the field as well.
+_FREE = {"thickness": ft.thickness("varnish"), "alpha": ft.alpha("varnish"), "rho_g": ft.rho_g(),
+         "index": ft.index_n("varnish")}
+_OBJECTIVES = {field: ft.Objective(_varnish(), WL, ft.Dataset(ls.Sphere(8.0), np.full(WL.size, 0.3), sigma=0.01),
+                                   [_FREE[field]]) for field in _FREE}
+_JITTED_OBJECTIVE = {field: jax.jit(lambda x, o=o: o.predict(x)[0]) for field, o in _OBJECTIVES.items()}
+
+
+@pytest.mark.parametrize("field", sorted(_FIELDS))
+@settings(max_examples=5)
+@given(data=st.data())
+def test_property_invalid_inputs_through_objective_eager_and_jitted(field, data):
+    build, values = _FIELDS[field]
+    v = data.draw(values)
+    y = np.full(WL.size, 0.3)
+    _raises_naming(field, lambda: ft.Objective(build(v), WL, ft.Dataset(ls.Sphere(8.0), y), [ft.thickness("varnish")]))
+    size = _OBJECTIVES[field].n_parameters
+    _raises_naming(field, lambda: _JITTED_OBJECTIVE[field](jnp.full(size, v)))

@@ -1,5 +1,5 @@
-"""Cost of the traced validation (issue 18): P1 and P2 forward with this tree against a tree
-without it, side by side, alternating runs in fresh processes.
+"""Cost of the traced validation (issue 18): P1 and P2 forward and F1 fits with this tree against
+a tree without it, side by side, alternating runs in fresh processes.
 
 ``python -m benchmarks.validation_cost --before PATH [--rounds 3]``: ``PATH`` is a checkout of
 the code before the change (e.g. ``git worktree add /tmp/before b28ade3``). Each round runs the
@@ -8,7 +8,9 @@ The worker uses only API present in both trees: ``ls.reflectance`` with ``ls.Sph
 ``ls.specular`` (P1; radians positional before, ``angle_rad=`` after).
 
 P2: 3 Beer layers over a Lambertian background, sphere 8° SCE, 401 λ, 1000 stacks by
-``lax.map`` in blocks of 4. P1: 10 coherent films, 1000 λ × 64 angles, s + p.
+``lax.map`` in blocks of 4. P1: 10 coherent films, 1000 λ × 64 angles, s + p. F1: 200
+per-pixel fits of ``benchmarks.fitting_cases``' F1 problem (top thickness + 3 α coefficients,
+401 λ, sphere) by one ``fitting.fit_batch`` call after a compiling call, best of 2.
 """
 
 from __future__ import annotations
@@ -53,7 +55,30 @@ try:
 except TypeError:
     p1 = jax.jit(lambda a: ls.specular(film, wl1, a, both_sides=False).R_front)
 t_p1 = best(p1, ang)
-print(json.dumps({"p2_s": t_p2, "p1_s": t_p1}))
+
+import fitting
+WLF = np.linspace(380.0, 780.0, 401)
+B = fitting.bspline_basis(WLF, 3)
+def f1_stack(h_top, alpha_mid):
+    band = 1e-6 + 3e-5 * np.exp(-(((WLF - 550.0) / 25.0) ** 2))
+    return ls.Stack(1.0, [
+        ls.Layer(1.52, h_top, coherent=False, alpha=band, name="top"),
+        ls.Layer(ls.Cauchy(1.50, 0.004), 15_000.0, coherent=False, alpha=alpha_mid, name="ink"),
+        ls.Layer(1.45, 8_000.0, coherent=False, alpha=1e-6, name="primer"),
+    ], ls.LambertianBackground(1.5, 0.15 + 0.6 / (1 + np.exp(-(WLF - 560.0) / 25.0))))
+rng = np.random.default_rng(1)
+n = 200
+hc = np.column_stack([rng.uniform(15_000.0, 30_000.0, n), rng.uniform(0.5e-5, 4e-5, (n, 3))])
+one = lambda v: ls.reflectance(f1_stack(v[0], B @ v[1:]), WLF, ls.Sphere(8.0))
+data = np.asarray(jax.jit(lambda v: jax.lax.map(one, v, batch_size=50))(hc)) + 0.002 * rng.standard_normal((n, WLF.size))
+obj = fitting.Objective(f1_stack(20_000.0, B @ np.full(3, 1e-5)), WLF, fitting.Dataset(ls.Sphere(8.0), data[0], sigma=0.002),
+                        [fitting.thickness("top"), fitting.alpha("ink", basis=B, value=np.full(3, 1e-5))])
+fitting.fit_batch(obj, data[:100], chunk_size=100)  # compile
+t = []
+for _ in range(2):
+    t0 = time.perf_counter(); b = fitting.fit_batch(obj, data, chunk_size=100); t.append(time.perf_counter() - t0)
+assert b.converged.all()
+print(json.dumps({"p2_s": t_p2, "p1_s": t_p1, "f1_s": min(t)}))
 '''
 
 
@@ -75,8 +100,9 @@ def main(argv=None) -> int:
         for name, tree in order:
             runs[name].append(_run(tree))
             print(name, runs[name][-1], f"load {os.getloadavg()[0]:.1f}", flush=True)
-    best = {k: {q: min(x[q] for x in v) for q in ("p1_s", "p2_s")} for k, v in runs.items()}
-    for q, label in (("p1_s", "P1 forward (10 films, 1000 λ × 64 angles)"), ("p2_s", "P2 forward (1000 spectra)")):
+    best = {k: {q: min(x[q] for x in v) for q in ("p1_s", "p2_s", "f1_s")} for k, v in runs.items()}
+    for q, label in (("p1_s", "P1 forward (10 films, 1000 λ × 64 angles)"), ("p2_s", "P2 forward (1000 spectra)"),
+                     ("f1_s", "F1 fits (200 per-pixel fits, compiled)")):
         b, a = best["before"][q], best["after"][q]
         print(f"{label}: before {b * 1e3:.1f} ms, after {a * 1e3:.1f} ms, cost {100 * (a / b - 1):+.1f} %")
     print(json.dumps({"runs": runs, "best": best, "when": time.strftime("%Y-%m-%d %H:%M")}))

@@ -8,11 +8,12 @@ import sys
 from layerstack_jax import LayerstackError
 
 from ._common import PROG
+from ._cube import _add_fit_cube_parser
 from ._design import _add_design_parser
 from ._fit import _add_fit_parser
 from ._predict import _add_predict_parser
 
-_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser, _add_design_parser)
+_SUBCOMMANDS = (_add_predict_parser, _add_fit_parser, _add_fit_cube_parser, _add_design_parser)
 
 
 def _build_parser() -> argparse.ArgumentParser:

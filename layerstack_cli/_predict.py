@@ -1,4 +1,4 @@
-"""``layerstack predict STACK.toml -g GEOM ... -o out.csv [--plot out.png]``."""
+"""``layerstack predict STACK.toml -g GEOM ... -o out.csv [--plot out.png] [--vary LAYER.FIELD=START:STOP:STEP ...]``."""
 
 from __future__ import annotations
 
@@ -40,7 +40,187 @@ def _add_predict_parser(sub) -> None:
     p.add_argument("--ellipsometry", action="append", type=float, metavar="ANGLE",
                    help="also write psi_ANGLE and delta_ANGLE (degrees; Delta as instruments report it, 180 - tmm's Delta, in (-180, 180]) "
                    "of a coherent stack; repeat for several angles")
+    p.add_argument("--vary", action="append", metavar="LAYER.FIELD=START:STOP:STEP",
+                   help="predict a batch of stacks: the value of LAYER.FIELD (the layer's name and key in the stack "
+                        "file, e.g. varnish.thickness_nm, varnish.alpha_per_nm, film.n, film.k; or background.rho_g, "
+                        "background.n, substrate.n, substrate.k, ambient.n) from START to STOP (included when on the "
+                        "grid) by STEP, or a comma list of values, in the file's units. Repeat for several fields: "
+                        "every combination is computed (outer product; the last --vary varies fastest). The CSV then "
+                        "has one column per sample and geometry, named by the sample's values "
+                        "(varnish.thickness_nm=10000; with several geometry columns prefixed 'GEOM ')")
+    p.add_argument("--vary-table", metavar="FILE.csv",
+                   help="like --vary, one sample per row: a CSV whose header names LAYER.FIELD columns")
+    p.add_argument("--digits", type=_positive_int, default=10, metavar="N",
+                   help="significant digits written in the CSV (default 10; 17 keeps float64 exactly)")
     p.set_defaults(func=_cmd_predict)
+
+
+# --------------------------------------------------------------------------- batches (--vary)
+_TOP = {"ambient": ("n",), "substrate": ("n", "k"), "background": ("n", "rho_g")}
+_LAYER_FIELDS = ("thickness_nm", "alpha_per_nm", "n", "k")
+
+
+def _vary_grid(spec: str) -> tuple[str, np.ndarray]:
+    """``(name, values)`` of one ``--vary NAME=START:STOP:STEP`` (or ``NAME=v1,v2,...``)."""
+    name, sep, grid = spec.partition("=")
+    name = name.strip()
+    if not sep or not name or not grid.strip():
+        raise LayerstackError(f"--vary {spec!r}: write LAYER.FIELD=START:STOP:STEP (e.g. "
+                              "varnish.thickness_nm=1e4:5e4:1000) or LAYER.FIELD=v1,v2,...")
+    text = grid.strip()
+    try:
+        if ":" in text:
+            parts = text.split(":")
+            if len(parts) != 3:
+                raise ValueError
+            a, b, step = (float(x) for x in parts)
+            if not all(np.isfinite((a, b, step))) or step <= 0 or b < a:
+                raise LayerstackError(f"--vary {spec!r}: need finite START <= STOP and STEP > 0")
+            values = a + step * np.arange(int(np.floor((b - a) / step + 1e-9)) + 1)
+        else:
+            values = np.asarray([float(x) for x in text.split(",")], dtype=float)
+    except ValueError:
+        raise LayerstackError(f"--vary {spec!r}: the values must be START:STOP:STEP or a comma list of numbers") from None
+    if not np.all(np.isfinite(values)):
+        raise LayerstackError(f"--vary {spec!r}: values must be finite")
+    return name, values
+
+
+def _vary_table(path: str) -> tuple[list, np.ndarray]:
+    """``(names, values (samples, fields))`` of a ``--vary-table`` CSV (header: LAYER.FIELD names)."""
+    import csv
+
+    p = Path(path)
+    if not p.is_file():
+        raise LayerstackError(f"{path}: file not found")
+    with p.open(newline="", encoding="utf-8") as f:
+        rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+    if len(rows) < 2:
+        raise LayerstackError(f"{path}: need a header of LAYER.FIELD names and at least one row of values")
+    names = [c.strip() for c in rows[0]]
+    if any(not n for n in names) or len(set(names)) != len(names):
+        raise LayerstackError(f"{path}: header names must be non-empty and distinct, got {names}")
+    values = np.empty((len(rows) - 1, len(names)))
+    for i, row in enumerate(rows[1:], start=2):
+        if len(row) != len(names):
+            raise LayerstackError(f"{path}: row {i} has {len(row)} values for {len(names)} columns")
+        for j, cell in enumerate(row):
+            try:
+                values[i - 2, j] = float(cell)
+            except ValueError:
+                raise LayerstackError(f"{path}: row {i}, column {names[j]!r}: {cell.strip()!r} is not a number") from None
+            if not np.isfinite(values[i - 2, j]):
+                raise LayerstackError(f"{path}: row {i}, column {names[j]!r}: {cell.strip()!r} is not finite")
+    return names, values
+
+
+def _samples(args) -> tuple[list, np.ndarray]:
+    """``(names, values (samples, fields))`` from ``--vary`` (outer product) or ``--vary-table``."""
+    if args.vary and args.vary_table:
+        raise LayerstackError("give --vary or --vary-table, not both")
+    if args.vary_table:
+        return _vary_table(args.vary_table)
+    grids = [_vary_grid(s) for s in args.vary]
+    names = [n for n, _ in grids]
+    for n in names:
+        if names.count(n) > 1:
+            raise LayerstackError(f"--vary {n}: given twice")
+    mesh = np.meshgrid(*[v for _, v in grids], indexing="ij")
+    return names, np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def _set_field(stack, name: str, column: np.ndarray, source: str):
+    """``stack`` with the file field ``name`` (``LAYER.FIELD``) set to one value per sample,
+    ``column`` ``(samples,)``, as a ``(samples, 1)`` leaf; rebuilt through the constructors, so
+    the values are checked (a negative thickness, ρg outside [0, 1] …)."""
+    from layerstack_jax import Index, LambertianBackground, Layer, Stack, Substrate
+
+    owner, dot, field = name.rpartition(".")
+    layers = {layer.name: i for i, layer in enumerate(stack.layers)}
+    if not dot or not owner:
+        raise LayerstackError(f"{name}: write LAYER.FIELD (layers in {source}: {', '.join(layers) or 'none'})")
+    values = np.asarray(column, dtype=float)[:, None]
+
+    def index_with(material, what):
+        if not isinstance(material, Index) or np.ndim(material.n) or np.ndim(material.k):
+            raise LayerstackError(f"{name}: the {what} index in {source} is not a plain number "
+                                  f"({type(material).__name__}); only numbers n = ..., k = ... can be varied")
+        return Index(values, material.k) if field == "n" else Index(material.n, values)
+
+    if owner in _TOP and owner not in layers:
+        if field not in _TOP[owner]:
+            raise LayerstackError(f"{name}: unknown field {field!r} of [{owner}]; fields: {', '.join(_TOP[owner])}")
+        if owner == "ambient":
+            return Stack(index_with(stack.ambient, "ambient"), stack.layers, stack.exit)
+        kind = "substrate" if isinstance(stack.exit, Substrate) else "background"
+        if owner != kind:
+            raise LayerstackError(f"{name}: {source} has a [{kind}], not a [{owner}]")
+        if owner == "substrate":
+            return Stack(stack.ambient, stack.layers, Substrate(index_with(stack.exit.index, "substrate")))
+        if field == "rho_g":
+            if callable(stack.exit.reflectance) or np.ndim(stack.exit.reflectance):
+                raise LayerstackError(f"{name}: rho_g in {source} is a spectrum; only a number can be varied")
+            return Stack(stack.ambient, stack.layers, LambertianBackground(stack.exit.index, values))
+        return Stack(stack.ambient, stack.layers, LambertianBackground(index_with(stack.exit.index, "background"),
+                                                                       stack.exit.reflectance))
+    if owner not in layers:
+        raise LayerstackError(f"{name}: no layer named {owner!r} in {source} (layers: {', '.join(layers) or 'none'}; "
+                              f"or {', '.join(f'{t}.FIELD' for t in _TOP)})")
+    if field not in _LAYER_FIELDS:
+        raise LayerstackError(f"{name}: unknown field {field!r} of layer {owner!r}; fields: {', '.join(_LAYER_FIELDS)}")
+    i = layers[owner]
+    old = stack.layers[i]
+    index, thickness, alpha = old.index, old.thickness, old.alpha
+    if field == "thickness_nm":
+        thickness = values
+    elif field == "alpha_per_nm":
+        if old.coherent:
+            raise LayerstackError(f"{name}: layer {owner!r} is coherent; alpha_per_nm is for incoherent layers "
+                                  "(vary its k)")
+        if alpha is not None and (callable(alpha) or np.ndim(alpha)):
+            raise LayerstackError(f"{name}: alpha_per_nm of layer {owner!r} is a spectrum; only a number can be varied")
+        alpha = values
+    else:
+        index = index_with(old.index, f"layer {owner!r}")
+    layer = Layer(index, thickness, coherent=old.coherent, alpha=alpha, name=old.name)
+    return Stack(stack.ambient, stack.layers[:i] + (layer,) + stack.layers[i + 1:], stack.exit)
+
+
+def _sample_label(names: list, row) -> str:
+    return " ".join(f"{n}={v:.12g}" for n, v in zip(names, row))
+
+
+def _predict_batch(args, stack, wavelength, requested) -> tuple[dict, dict]:
+    """Columns ``{GEOM? name=value ...: (wl,)}`` of every sample of ``--vary``/``--vary-table``,
+    computed by :func:`layerstack_jax.predict` (batched, chunked: bounded memory)."""
+    from layerstack_jax import predict
+
+    if args.polarization or args.ellipsometry:
+        raise LayerstackError("--vary/--vary-table compute reflectance geometries only; drop --polarization and "
+                              "--ellipsometry (or run them on single stacks)")
+    names, values = _samples(args)
+    batched = stack
+    for j, name in enumerate(names):
+        try:
+            batched = _set_field(batched, name, values[:, j], args.stack)
+        except LayerstackError as e:
+            msg = str(e)
+            raise LayerstackError(msg if msg.startswith(name) else f"{name}: {msg}") from None
+    labels = [_sample_label(names, row) for row in values]
+    if len(set(labels)) != len(labels):
+        raise LayerstackError("two samples have the same values (to 12 digits): "
+                              f"{next(x for x in labels if labels.count(x) > 1)}")
+    columns, geometries = {}, {}
+    for gname, geometry in requested:
+        try:
+            spectra = predict(batched, wavelength, geometry, batch_shape=(values.shape[0],), nodes=args.nodes)
+        except LayerstackError as e:
+            raise LayerstackError(f"geometry {gname!r}: {e}") from None
+        for label, spectrum in zip(labels, np.asarray(spectra, dtype=float)):
+            key = label if len(requested) == 1 else f"{gname} {label}"
+            columns[key] = spectrum
+            geometries[key] = geometry
+    return columns, geometries
 
 
 def _cmd_predict(args) -> int:
@@ -56,6 +236,9 @@ def _cmd_predict(args) -> int:
         if args.polarization and not any(g.supports_polarization for _, g in requested):
             raise LayerstackError("--polarization needs at least one brdf:I:V geometry")
         columns, geometries = {}, {}
+        if args.vary or args.vary_table:
+            columns, geometries = _predict_batch(args, stack, wavelength, requested)
+            requested = []
         for name, geometry in requested:
             try:
                 # Eager (not jitted) on purpose: concrete inputs keep the library's checks,
@@ -73,7 +256,7 @@ def _cmd_predict(args) -> int:
                 continue
             columns[name] = np.asarray(values, dtype=float)
             geometries[name] = geometry
-        for angle in args.ellipsometry or ():
+        for angle in () if args.vary or args.vary_table else args.ellipsometry or ():
             try:
                 e = ellipsometry(stack, wavelength, angle)
             except LayerstackError as err:
@@ -84,12 +267,18 @@ def _cmd_predict(args) -> int:
     bad = [name for name, v in columns.items() if not np.all(np.isfinite(v))]
     if bad:
         print(f"{PROG}: warning: non-finite values in column(s) {', '.join(bad)}", file=sys.stderr)
-    out = save_spectra_csv(args.output, wavelength, columns)
-    ranges = ", ".join(f"{name} {np.nanmin(v):.4g}..{np.nanmax(v):.4g}" for name, v in columns.items())
+    out = save_spectra_csv(args.output, wavelength, columns, fmt=f"%.{args.digits}g")
+    if len(columns) > 6:
+        values = np.stack(list(columns.values()))
+        ranges = f"{len(columns)} columns {np.nanmin(values):.4g}..{np.nanmax(values):.4g}"
+    else:
+        ranges = ", ".join(f"{name} {np.nanmin(v):.4g}..{np.nanmax(v):.4g}" for name, v in columns.items())
     grid = f"{wavelength[0]:g}-{wavelength[-1]:g} nm" if wavelength.size > 1 else f"{wavelength[0]:g} nm"
     elapsed = time.perf_counter() - start
     print(f"{PROG}: wrote {out} ({wavelength.size} wavelengths {grid}; {ranges}) in {elapsed:.1f} s")
-    if args.plot:
+    if args.plot and len(columns) > 20:
+        print(f"{PROG}: warning: no plot written: {len(columns)} columns (--plot draws up to 20)", file=sys.stderr)
+    elif args.plot:
         plot = Path(args.plot)
         plot.parent.mkdir(parents=True, exist_ok=True)
         _plot(plot, wavelength, columns, geometries, title=Path(args.stack).name, subtitle=_describe(stack))

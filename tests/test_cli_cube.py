@@ -1,0 +1,212 @@
+"""`layerstack fit-cube` and `layerstack predict --vary / --vary-table` (issue 19).
+
+The cube is made by the public forward model (:func:`layerstack_jax.predict`) from known maps of
+a film's thickness and index; the command line must give those maps back, mark the NaN and the
+masked pixel, write the quick-look PNGs, say that it resumes on a second run, and refuse a cube
+without a geometry or a mask of the wrong shape with exit status 2 and one line. The batched
+prediction is compared with :func:`layerstack_jax.reflectance` on each single stack, built
+directly in Python (not through the stack file or the batch code).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+
+import numpy as np
+import pytest
+
+pytest.importorskip("xarray")
+pytest.importorskip("zarr")
+pytest.importorskip("dask")
+pytest.importorskip("matplotlib")
+
+import layerstack_jax as ls  # noqa: E402
+from layerstack_cli import main  # noqa: E402
+
+WL = np.arange(400.0, 701.0, 10.0)  # 31 bands
+GEOMETRY = ls.Specular(8.0, "R")
+NY, NX = 6, 5
+NAN_PIXEL, MASKED_PIXEL = (1, 2), (4, 4)
+
+MODEL = """
+[[layers]]
+name = "film"
+n = { value = 2.05, free = true, min = 1.6, max = 2.6 }
+thickness_nm = { value = 150, free = true, min = 60, max = 260 }
+coherent = true
+
+[substrate]
+n = 1.52
+"""
+
+
+def _truth():
+    rng = np.random.default_rng(7)
+    d = rng.uniform(110.0, 190.0, (NY, NX))
+    n = rng.uniform(1.9, 2.2, (NY, NX))
+    film = ls.Layer(ls.Index(n[..., None]), d[..., None], coherent=True, name="film")
+    cube = np.array(ls.predict(ls.Stack(1.0, [film], ls.Substrate(1.52)), WL, GEOMETRY))
+    cube[NAN_PIXEL + (4,)] = np.nan  # one NaN band: no data
+    return cube, d, n
+
+
+CUBE, D_TRUE, N_TRUE = _truth()
+
+
+@pytest.fixture(scope="module")
+def cube_files(tmp_path_factory):
+    import xarray as xr
+
+    from layerstack_jax import write_zarr_cube
+
+    d = tmp_path_factory.mktemp("cli_cube")
+    (d / "model.toml").write_text(MODEL)
+    cube = xr.DataArray(CUBE, dims=("y", "x", "wavelength"), coords={"wavelength": WL},
+                        attrs={"geometry": "specular:8:R"})  # the cube says how it was measured
+    write_zarr_cube(cube, d / "cube.zarr", chunks=(3, 3, -1))
+    np.save(d / "cube.npy", CUBE)  # no metadata at all
+    mask = np.ones((NY, NX), bool)
+    mask[MASKED_PIXEL] = False
+    np.save(d / "mask.npy", mask)
+    np.save(d / "mask_wrong.npy", np.ones((NX, NY), bool))
+    return d
+
+
+@pytest.fixture(scope="module")
+def fit_command(cube_files):
+    d = cube_files
+    argv = ["fit-cube", str(d / "model.toml"), str(d / "cube.zarr"), "-o", str(d / "maps.zarr"), "--mask",
+            str(d / "mask.npy"), "--chunk", "3", "--batch", "8", "--sigma", "1e-3", "--quiet"]
+    return d, argv
+
+
+def test_fit_cube_recovers_the_maps_marks_pixels_and_writes_quicklooks(fit_command, capsys):
+    import xarray as xr
+
+    d, argv = fit_command
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "geometry: specular:8:R" in out and "from the cube's metadata" in out
+    assert "resuming" not in out
+    maps = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
+    status = maps["status"].values
+    assert status[NAN_PIXEL] == 2 and status[MASKED_PIXEL] == 1
+    ok = status == 0
+    assert ok.sum() == NY * NX - 2
+    for var in ("thickness_nm_film", "n_film", "thickness_nm_film_stderr", "reduced_chi2"):
+        assert np.all(np.isnan(maps[var].values[~ok])), var
+    # the truth the cube was made from (noise-free data: the fits reach it)
+    assert np.all(maps["converged"].values[ok] == 1)
+    np.testing.assert_allclose(maps["thickness_nm_film"].values[ok], D_TRUE[ok], atol=0.05)
+    np.testing.assert_allclose(maps["n_film"].values[ok], N_TRUE[ok], atol=1e-4)
+    # summary table
+    assert re.search(r"outside the mask\s+1\n", out) and re.search(r"no data \(NaN/inf\)\s+1\n", out)
+    assert "median reduced chi2" in out and "pixels/s" in out
+    assert re.search(r"implausible fits\s+0 ", out)  # noise-free data, sigma 1e-3: chi2 ~ 0
+    assert re.search(r"NOT converged\s+0\n", out) and re.search(rf"fitted\s+{NY * NX - 2}\n", out)
+    # quick looks: every map, printed
+    ql = d / "maps_quicklook"
+    for name in ("thickness_nm_film", "thickness_nm_film_stderr", "n_film", "n_film_stderr", "reduced_chi2",
+                 "status"):
+        png = ql / f"{name}.png"
+        assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert f"wrote {png}" in out
+    assert (d / "maps.zarr.log").read_text().count("px/s") >= 1  # progress logged
+
+
+def test_second_run_resumes(fit_command, capsys):
+    d, argv = fit_command
+    if not (d / "maps.zarr").exists():
+        assert main(argv) == 0
+    capsys.readouterr()
+    assert main(argv + ["--no-quicklook"]) == 0
+    out = capsys.readouterr().out
+    assert "resuming: 4 of 4 chunks already written" in out  # 6 x 5 pixels in 3 x 3 regions
+
+
+def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):
+    d = cube_files
+    base = ["fit-cube", str(d / "model.toml"), str(d / "cube.npy"), "-w", "400:700:10", "-o", str(d / "x.zarr")]
+    assert main(base) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cube.npy" in err and "give -g GEOM" in err and "Traceback" not in err
+    assert main(base + ["-g", "specular:8:R", "--mask", str(d / "mask_wrong.npy")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "mask_wrong.npy" in err and f"({NY}, {NX})" in err
+    assert not (d / "x.zarr").exists()  # refused before anything was written
+
+
+# ----------------------------------------------------------------------------- predict --vary
+
+VARNISH = """
+[[layers]]
+name = "varnish"
+n = 1.5
+thickness_nm = 20000
+coherent = false
+alpha_per_nm = 1e-5
+
+[substrate]
+n = 1.52
+"""
+
+
+def _read_csv(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    header, values = rows[0], np.array(rows[1:], dtype=float)
+    return header, values
+
+
+def _single(h, alpha, q):
+    """One stack built directly (not from the file), its specular spectrum at normal incidence."""
+    st = ls.Stack(1.0, [ls.Layer(1.5, h, coherent=False, alpha=alpha, name="varnish")], ls.Substrate(1.52))
+    return np.asarray(ls.reflectance(st, WL, ls.Specular(0.0, q)))
+
+
+def test_predict_vary_outer_product_equals_single_stacks(tmp_path):
+    (tmp_path / "s.toml").write_text(VARNISH)
+    out = tmp_path / "v.csv"
+    assert main(["predict", str(tmp_path / "s.toml"), "-g", "specular:0", "-w", "400:700:10", "-o", str(out),
+                 "--vary", "varnish.thickness_nm=1e4:3e4:1e4", "--vary", "varnish.alpha_per_nm=1e-5,4e-5",
+                 "--digits", "17"]) == 0
+    header, values = _read_csv(out)
+    np.testing.assert_array_equal(values[:, 0], WL)
+    expected_names = []
+    for q in ("R", "T", "A"):
+        for h in (10000, 20000, 30000):
+            for a in ("1e-05", "4e-05"):
+                expected_names.append(f"{q}_0 varnish.thickness_nm={h} varnish.alpha_per_nm={a}")
+                col = values[:, len(expected_names)]
+                np.testing.assert_allclose(col, _single(float(h), float(a), q), rtol=0, atol=1e-12)
+    assert header[1:] == expected_names
+
+
+def test_predict_vary_table_one_geometry(tmp_path):
+    (tmp_path / "s.toml").write_text(VARNISH)
+    table = tmp_path / "samples.csv"
+    table.write_text("varnish.thickness_nm,varnish.alpha_per_nm\n15000,2e-5\n40000,1e-6\n")
+    out = tmp_path / "t.csv"
+    assert main(["predict", str(tmp_path / "s.toml"), "-g", "specular:0:T", "-w", "400:700:10", "-o", str(out),
+                 "--vary-table", str(table), "--digits", "17"]) == 0
+    header, values = _read_csv(out)
+    assert header == ["wavelength_nm", "varnish.thickness_nm=15000 varnish.alpha_per_nm=2e-05",
+                      "varnish.thickness_nm=40000 varnish.alpha_per_nm=1e-06"]
+    np.testing.assert_allclose(values[:, 1], _single(15000.0, 2e-5, "T"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(values[:, 2], _single(40000.0, 1e-6, "T"), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("vary, message", [
+    ("varnish.thickness=1:2:1", "unknown field 'thickness' of layer 'varnish'"),
+    ("paint.thickness_nm=1:2:1", "no layer named 'paint'"),
+    ("background.rho_g=0:1:0.5", "has a [substrate], not a [background]"),
+    ("varnish.thickness_nm=-5:5:5", "must be >= 0"),
+])
+def test_predict_vary_errors_name_the_field(tmp_path, capsys, vary, message):
+    (tmp_path / "s.toml").write_text(VARNISH)
+    assert main(["predict", str(tmp_path / "s.toml"), "-g", "specular:0", "-o", str(tmp_path / "e.csv"),
+                 "--vary", vary]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err and vary.split("=")[0] in err
+    assert not (tmp_path / "e.csv").exists()

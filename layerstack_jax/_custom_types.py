@@ -1,4 +1,4 @@
-"""Array aliases used in signatures (jaxtyping).
+"""Array aliases used in signatures (jaxtyping), kept in one place.
 
 Axis names used throughout the package:
 
@@ -9,11 +9,13 @@ Axis names used throughout the package:
 * ``med``  — medium of a stack, ordered from the ambient (index 0) to the exit medium,
 * ``lay``  — layer of a stack (media without the two semi-infinite ones),
 * ``*batch`` — any leading batch axes, broadcast together.
+
+The aliases document shapes and units; they are not checked at run time. ``IndexSpectrum`` is
+an *array* of sampled indices; the public :class:`layerstack_jax.Index` is the material class.
 """
 
 from typing import Union
 
-import numpy as np
 from jaxtyping import Array, ArrayLike, Complex, Float, Inexact
 
 #: Anything convertible to an array of real numbers (Python float, numpy or JAX array).
@@ -21,23 +23,23 @@ RealLike = Union[float, int, ArrayLike]
 #: Anything convertible to a (possibly complex) array.
 ComplexLike = Union[complex, float, int, ArrayLike]
 
-Real = Float[Array, "..."]
-Cplx = Complex[Array, "..."]
+#: A dimensionless spectrum (reflectance, transmittance …) or a BRDF (1/sr) on the grid: ``(*batch, wl)``.
 Spectrum = Float[Array, "*batch wl"]
+#: Vacuum wavelengths in nm, ``(wl,)``.
 Wavelengths = Float[Array, " wl"]
-Index = Inexact[Array, "*batch wl"]
+#: Complex refractive index n + ik sampled on the grid (k >= 0 absorbing), ``(*batch, wl)``;
+#: a dispersionless medium may give ``(*batch, 1)`` or a scalar.
+IndexSpectrum = Inexact[Array, "*batch wl"]
 
 __all__ = [
     "Array",
     "ArrayLike",
     "Complex",
-    "Cplx",
-    "Float",
-    "Index",
-    "Real",
-    "RealLike",
     "ComplexLike",
+    "Float",
+    "Inexact",
+    "IndexSpectrum",
+    "RealLike",
     "Spectrum",
     "Wavelengths",
-    "np",
 ]

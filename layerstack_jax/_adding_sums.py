@@ -71,7 +71,9 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
-from ._incoherent import beer_factor, beer_rates, safe_reciprocal
+from ._custom_types import Array, Float, Wavelengths
+from ._incoherent import beer_factor, beer_rates
+from ._numerics import safe_reciprocal
 
 __all__ = ["hemispherical_sums"]
 
@@ -133,7 +135,8 @@ def _plain(packets, paths, thickness, alpha, wavelength, w, back: bool, transmit
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(6, 7))
-def hemispherical_sums(packets, paths, thickness, alpha, wavelength, w, back: bool, transmits: bool):
+def hemispherical_sums(packets, paths, thickness, alpha, wavelength: Wavelengths, w, back: bool, transmits: bool
+                       ) -> tuple[Float[Array, " wl"], Float[Array, " wl"]]:
     """``(r, t)``: Lambertian sums ``Σ w · natural(R)``, ``Σ w · natural(T)`` of the packets
     joined through the thick layers between them (one-sided sweep of the module docstring).
 

@@ -71,14 +71,16 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._coherent import _abs2, _lift_branch_point, _media, _packet_recursion
-from ._custom_types import Array, Float, RealLike
-from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, safe_divide
-from ._he_torrance import (SHADOWING_FORMS, _check_angles_deg, auto_terms, check_roughness, directional_diffuse,
-                           specular_attenuation)
+from ._coherent import _lift_branch_point, _media, _packet_recursion
+from ._custom_types import Array, Complex, Float, RealLike
+from ._fresnel import exit_medium_ratio, fresnel_amplitudes, normal_wavevector, power_flux
+from ._he_torrance import SHADOWING_FORMS, auto_terms, check_roughness, directional_diffuse, specular_attenuation
+from ._illumination import snell_invariant
+from ._numerics import abs2, safe_divide, safe_divide_nonzero
 from ._response import natural
 from ._stack import ResolvedStack, Stack, Substrate, resolve
-from ._validate import LayerstackError, LayerstackWarning, check_finite, check_unit_interval, is_concrete
+from ._validate import (LayerstackError, LayerstackWarning, check_angle_deg, check_finite, check_unit_interval,
+                        is_concrete)
 
 __all__ = ["CoatedRough", "coated_rough", "FORMS", "PREFACTORS", "check_coated_stack", "rough_specular",
            "rough_diffuse"]
@@ -105,12 +107,12 @@ class _Direction(NamedTuple):
     ``n`` and normal wavevectors ``q`` ``(media, *B)``, interface amplitudes ``r, t``
     ``(2, interface, *B)``, power fluxes ``(2, media, *B)`` and the cosine in medium N."""
 
-    n: object
-    q: object
-    r: object
-    t: object
-    flux: object
-    cos_N: object
+    n: Complex[Array, "med *B"]
+    q: Complex[Array, "med *B"]
+    r: Complex[Array, "pol med-1 *B"]
+    t: Complex[Array, "pol med-1 *B"]
+    flux: Float[Array, "pol med *B"]
+    cos_N: Float[Array, "*B"]
 
 
 def _direction(rs: ResolvedStack, s) -> _Direction:
@@ -149,8 +151,8 @@ def rough_specular(rs: ResolvedStack, s, sigma0, tau, *, shadowing_form: str = "
     t_last = dirn.t[:, -1] * jnp.exp(-0.5 * (k0 * sigma0 * (dirn.q[-2] - dirn.q[-1])) ** 2)[None]
     gamma, tau_t = _packet_recursion(_seeded(dirn.r, eta), _seeded(dirn.t, t_last), dirn.q[1:-1], d_films,
                                      rs.wavelength)
-    R = _abs2(gamma)
-    T = safe_divide(_abs2(tau_t) * dirn.flux[:, -1], dirn.flux[:, 0])
+    R = abs2(gamma)
+    T = safe_divide(abs2(tau_t) * dirn.flux[:, -1], dirn.flux[:, 0])
     opaque = jnp.imag(dirn.n[-1]) > 0
     return R, jnp.where(opaque, 0.0, T)
 
@@ -189,21 +191,14 @@ def rough_diffuse(rs: ResolvedStack, s_in, s_out, phi, sigma0, tau, *, n_terms: 
     down_in = _down(rs, d_in, _eta_specular(rs, d_in, sigma0, tau, shadowing_form))
     if form == "radiometric":
         down_out = _down(rs, d_out, _eta_specular(rs, d_out, sigma0, tau, shadowing_form))
-        T_in = safe_divide(_abs2(down_in) * d_in.flux[:, -2], d_in.flux[:, 0])
-        T_out = safe_divide(_abs2(down_out) * d_out.flux[:, -2], d_out.flux[:, 0])
-        ratio = (jnp.real(rs.n[0]) / n_N) ** 2
-        return ratio * (T_in * rho * T_out)
+        T_in = safe_divide(abs2(down_in) * d_in.flux[:, -2], d_in.flux[:, 0])
+        T_out = safe_divide(abs2(down_out) * d_out.flux[:, -2], d_out.flux[:, 0])
+        return exit_medium_ratio(rs.n[0], n_N) * (T_in * rho * T_out)
     if form == "literal":
         at = d_out if prefactor == "view" else d_in
-        pref = _abs2(safe_divide_complex(at.q[-2], at.q[0]))
-        return pref * _abs2(_single_pass(rs, d_out)) * _abs2(down_in) * rho
+        pref = abs2(safe_divide_nonzero(at.q[-2], at.q[0]))
+        return pref * abs2(_single_pass(rs, d_out)) * abs2(down_in) * rho
     raise LayerstackError(f"form must be one of {FORMS}, got {form!r}")
-
-
-def safe_divide_complex(num, den):
-    """``num / den`` for complex arrays, 0 where ``den == 0`` (NaN-free gradient)."""
-    ok = den != 0
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
 
 def check_coated_stack(stack: Stack) -> None:
@@ -281,8 +276,8 @@ def coated_rough(
     """
     check_coated_stack(stack)
     check_options(form, prefactor, shadowing_form)
-    _check_angles_deg("incidence_deg", incidence_deg)
-    _check_angles_deg("viewing_deg", viewing_deg)
+    check_angle_deg("incidence_deg", incidence_deg, grazing=True)
+    check_angle_deg("viewing_deg", viewing_deg, grazing=True)
     check_finite("azimuth_deg", azimuth_deg)
     check_roughness(sigma_nm, tau_nm)
     check_unit_interval("uniform_albedo", uniform_albedo)
@@ -303,8 +298,7 @@ def _coated_rough_core(stack, wavelength_nm, incidence_deg, viewing_deg, azimuth
     rs = resolve(stack, wavelength_nm)
     dtype = jnp.result_type(rs.wavelength.dtype, float)
     ti, to, ph = jnp.broadcast_arrays(*(jnp.deg2rad(x.astype(dtype)) for x in (incidence_deg, viewing_deg, azimuth_deg)))
-    n0 = jnp.real(jnp.asarray(rs.n[0]))
-    s_in, s_out = n0 * jnp.sin(ti)[..., None], n0 * jnp.sin(to)[..., None]
+    s_in, s_out = snell_invariant(rs.n[0], ti), snell_invariant(rs.n[0], to)
     sigma0, tau = sigma_nm.astype(dtype), tau_nm.astype(dtype)
     R, T = rough_specular(rs, s_in, sigma0, tau, shadowing_form=shadowing_form)
     k_d = rough_diffuse(rs, s_in, s_out, ph[..., None], sigma0, tau, n_terms=n_terms, uniform_albedo=uniform_albedo,

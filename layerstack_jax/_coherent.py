@@ -17,13 +17,15 @@ contain :math:`e^{-i\phi_j}` and overflow there.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, safe_divide
+from ._custom_types import Array, IndexSpectrum, Inexact
+from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux
+from ._numerics import abs2, safe_divide
 
 __all__ = ["PacketIntensities", "packet_amplitudes", "stack_packets"]
 
@@ -33,16 +35,21 @@ _SCAN_THRESHOLD = 8
 
 
 class PacketIntensities(NamedTuple):
-    """Intensity reflectances and transmittances of a packet, per polarization.
+    """Intensity reflectances and transmittances of a packet, per polarization: the four fields
+    ``(R_front, T_front, R_back, T_back)`` that the adding rule
+    (:func:`~layerstack_jax._incoherent.add_layer`) composes.
 
-    Each field is shaped ``(2, *batch)`` with the polarization axis ``(s, p)`` first.
-    ``*_front``: light incident from the first medium of the packet; ``*_back``: from the last.
+    Each field is shaped ``(2, *batch)`` with the polarization axis ``(s, p)`` first,
+    dimensionless fractions of the incident power (real). ``*_front``: light incident from the
+    first medium of the packet; ``*_back``: from the last (None when not computed). The
+    polarimetry module carries, in the same type, the s–p correlations
+    ``(|a_s|², |a_p|², a_p ā_s)`` on a leading axis of 3 (complex dtype).
     """
 
-    R_front: object
-    T_front: object
-    R_back: object
-    T_back: object
+    R_front: Inexact[Array, "pol *batch"]
+    T_front: Inexact[Array, "pol *batch"]
+    R_back: Optional[Inexact[Array, "pol *batch"]]
+    T_back: Optional[Inexact[Array, "pol *batch"]]
 
 
 def _rouard(r, t, phase):
@@ -84,7 +91,7 @@ def _lift_branch_point(q):
     return jnp.where(jnp.abs(q) < eps, eps + 0j, q).astype(q.dtype)
 
 
-def packet_amplitudes(n: Sequence, d: Sequence, s, wavelength):
+def packet_amplitudes(n: Sequence[IndexSpectrum], d: Sequence, s, wavelength):
     r"""Composite amplitude reflection and transmission coefficients :math:`(\gamma, \tau)` of a
     coherent packet illuminated from its first medium (Hirayama et al. eqs. 1–4).
 
@@ -132,13 +139,7 @@ def _packet_recursion(r, t, q_films, d: Sequence, wavelength):
     return _rouard(r, t, phase)
 
 
-def _abs2(z):
-    """:math:`|z|^2` without the square root (and the hypot scaling) of ``abs``: cheaper, and its
-    derivative needs no division by :math:`|z|` (finite at z = 0)."""
-    return jnp.real(z) ** 2 + jnp.imag(z) ** 2
-
-
-def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength, *, both_sides: bool = True):
+def stack_packets(n: Sequence[IndexSpectrum], d: Sequence, bounds: Sequence[int], s, wavelength, *, both_sides: bool = True):
     r"""Intensity reflectance and transmittance, from both sides, of every packet of a stack:
     the runs of coherent films between the media at positions ``bounds`` (the ambient, the thick
     layers and the exit medium).
@@ -179,10 +180,10 @@ def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength
         q = q.at[films].set(_lift_branch_point(q[films]))
     flux = power_flux(n_arr, q)  # (2, media, *B)
     r_f, t_f = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, interface, *B)
-    R_f, T_f = _abs2(r_f), safe_divide(_abs2(t_f) * flux[:, 1:], flux[:, :-1])
+    R_f, T_f = abs2(r_f), safe_divide(abs2(t_f) * flux[:, 1:], flux[:, :-1])
     if both_sides:
         r_b, t_b = fresnel_amplitudes(n_arr[1:], q[1:], n_arr[:-1], q[:-1])
-        R_b, T_b = _abs2(r_b), safe_divide(_abs2(t_b) * flux[:, :-1], flux[:, 1:])
+        R_b, T_b = abs2(r_b), safe_divide(abs2(t_b) * flux[:, :-1], flux[:, 1:])
     packets = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         if b == a + 1:  # a bare interface
@@ -191,11 +192,11 @@ def stack_packets(n: Sequence, d: Sequence, bounds: Sequence[int], s, wavelength
             continue
         film_d = tuple(d[a : b - 1])
         gamma, tau = _packet_recursion(r_f[:, a:b], t_f[:, a:b], q[a + 1 : b], film_d, wavelength)
-        front = (_abs2(gamma), safe_divide(_abs2(tau) * flux[:, b], flux[:, a]))
+        front = (abs2(gamma), safe_divide(abs2(tau) * flux[:, b], flux[:, a]))
         backs = (None, None)
         if both_sides:  # the reversed packet: interfaces b-1 … a seen from their far side
             gamma, tau = _packet_recursion(r_b[:, a:b][:, ::-1], t_b[:, a:b][:, ::-1], q[a + 1 : b][::-1],
                                            film_d[::-1], wavelength)
-            backs = (_abs2(gamma), safe_divide(_abs2(tau) * flux[:, a], flux[:, b]))
+            backs = (abs2(gamma), safe_divide(abs2(tau) * flux[:, a], flux[:, b]))
         packets.append(PacketIntensities(*front, *backs))
     return tuple(packets), q

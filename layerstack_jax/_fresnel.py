@@ -21,11 +21,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ._custom_types import Array, ComplexLike, Complex, Float, RealLike
+
 __all__ = [
     "normal_wavevector",
     "fresnel_amplitudes",
     "power_flux",
-    "safe_divide",
+    "exit_medium_ratio",
 ]
 
 
@@ -48,7 +50,7 @@ def _forward_sqrt_jvp(primals, tangents):
     return w, jnp.where(zero, jnp.zeros_like(w), dz / (2 * w_safe))
 
 
-def normal_wavevector(n, s):
+def normal_wavevector(n: ComplexLike, s: RealLike) -> Complex[Array, "..."]:
     r"""Normal wavevector ratio :math:`q = \tilde n \cos\theta = \sqrt{\tilde n^2 - s^2}`.
 
     Args:
@@ -66,7 +68,8 @@ def normal_wavevector(n, s):
     return _forward_sqrt(n * n - jnp.asarray(s) ** 2)
 
 
-def fresnel_amplitudes(n_i, q_i, n_f, q_f):
+def fresnel_amplitudes(n_i: ComplexLike, q_i: ComplexLike, n_f: ComplexLike, q_f: ComplexLike
+                       ) -> tuple[Complex[Array, "2 *B"], Complex[Array, "2 *B"]]:
     r"""Fresnel amplitude coefficients of the interface from medium *i* into medium *f*.
 
     .. math::
@@ -101,7 +104,7 @@ def fresnel_amplitudes(n_i, q_i, n_f, q_f):
     return jnp.stack([r_s, r_p]), jnp.stack([t_s, t_p])
 
 
-def power_flux(n, q):
+def power_flux(n: ComplexLike, q: ComplexLike) -> Float[Array, "2 *B"]:
     r"""Normal component of the time-averaged Poynting vector per unit :math:`|E|^2`, up to a
     common constant, for s and p (stacked on a leading axis).
 
@@ -114,7 +117,11 @@ def power_flux(n, q):
     return jnp.stack([jnp.real(q), jnp.real(n * jnp.conj(cos))])
 
 
-def safe_divide(num, den):
-    """``num / den`` where ``den > 0``, else 0 — with a NaN-free gradient in both branches."""
-    ok = den > 0
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
+def exit_medium_ratio(n0: ComplexLike, n_exit: ComplexLike) -> Float[Array, "..."]:
+    r""":math:`(n_0/n_g)^2` (real parts; dimensionless, the broadcast shape of the two indices):
+    the radiance of light leaving a medium of index :math:`n_g` into the ambient :math:`n_0` is
+    divided by :math:`(n_g/n_0)^2` (étendue: :math:`L/n^2` is conserved across an interface),
+    and a diffuse flux seen from the other side scales the same way (reciprocity of the
+    diffuse transmittances). Simonot et al. eqs. 77, 79 with :math:`n_g` the background's
+    binder; the same factor for the object under films of Hirayama's coated rough surface."""
+    return (jnp.real(n0) / jnp.real(n_exit)) ** 2

@@ -77,8 +77,11 @@ import numpy as np
 
 from ._custom_types import Array, Float, RealLike
 from ._fresnel import fresnel_amplitudes, normal_wavevector
+from ._illumination import snell_invariant_from_cos
 from ._materials import as_material
-from ._validate import LayerstackError, LayerstackWarning, check_finite, check_nonnegative, check_unit_interval, is_concrete
+from ._numerics import abs2, safe_divide, sin_from_cos
+from ._validate import (LayerstackError, LayerstackWarning, check_angle_deg, check_finite, check_nonnegative,
+                        check_unit_interval, is_concrete)
 
 __all__ = [
     "HeTorrance",
@@ -127,17 +130,11 @@ def _lambert_w0_jvp(primals, tangents):
 
 
 # ----------------------------------------------------------------------------- geometry
-def _sin(cos):
-    return jnp.sqrt(jnp.clip(1.0 - cos * cos, 0.0, 1.0))
-
-
 def _cot_parameter(cos, sigma0, tau):
     r""":math:`a = \tau\cot\theta/(2\sigma_0)`; :data:`_A_MAX` (no shadowing) where σ0 = 0 or at
     normal incidence. Double-where: the untaken branch never divides by 0 (NaN-free gradient)."""
-    den = 2.0 * sigma0 * _sin(cos)
-    ok = den > 0
-    a = tau * cos / jnp.where(ok, den, 1.0)
-    return jnp.where(ok, jnp.minimum(a, _A_MAX), _A_MAX)
+    den = 2.0 * sigma0 * sin_from_cos(cos)
+    return jnp.where(den > 0, jnp.minimum(safe_divide(tau * cos, den), _A_MAX), _A_MAX)
 
 
 def shadowing(cos, sigma0, tau, form: str = "corrected"):
@@ -170,7 +167,7 @@ def effective_roughness(cos_i, cos_r, sigma0, tau):
 
     def k_term(cos):
         c = jnp.maximum(cos, _COS_MIN)
-        return _sin(c) / c * jsp.erfc(_cot_parameter(c, sigma0, tau))
+        return sin_from_cos(c) / c * jsp.erfc(_cot_parameter(c, sigma0, tau))
 
     k = k_term(cos_i) + k_term(cos_r)
     return sigma0 / jnp.sqrt(1.0 + lambert_w0(k * k / (8.0 * math.pi)))
@@ -188,16 +185,16 @@ class ScatteringVector(NamedTuple):
     ``vxy2`` = :math:`\\hat v_x^2 + \\hat v_y^2`, ``vz`` = :math:`\\cos\\theta_i + \\cos\\theta_r`,
     ``v2`` = :math:`|\\hat v|^2`."""
 
-    vxy2: object
-    vz: object
-    v2: object
+    vxy2: Float[Array, "*B"]
+    vz: Float[Array, "*B"]
+    v2: Float[Array, "*B"]
 
 
 def scattering_vector(cos_i, cos_r, phi) -> ScatteringVector:
     r""":math:`\hat v` of incidence cosine ``cos_i``, reflection cosine ``cos_r`` and azimuth
     ``phi`` (radians, 0 = forward/specular side), broadcast together. Symmetric under
     ``cos_i <-> cos_r`` (reciprocity)."""
-    sin_i, sin_r = _sin(cos_i), _sin(cos_r)
+    sin_i, sin_r = sin_from_cos(cos_i), sin_from_cos(cos_r)
     vxy2 = sin_i * sin_i + sin_r * sin_r - 2.0 * sin_i * sin_r * jnp.cos(phi)
     vxy2 = jnp.maximum(vxy2, 0.0)
     vz = cos_i + cos_r
@@ -243,7 +240,7 @@ def _fresnel_at(n_a, n_b, cos):
     """Fresnel amplitudes ``(r, t)`` ``(2, *B)`` from medium a (real n_a) onto b at cosine ``cos``
     in a (reuses :func:`layerstack_jax._fresnel.fresnel_amplitudes`)."""
     n_a = jnp.asarray(n_a).astype(complex)
-    s = jnp.real(n_a) * _sin(cos)
+    s = snell_invariant_from_cos(n_a, cos)
     q_a = n_a * cos
     q_b = normal_wavevector(n_b, s)
     return fresnel_amplitudes(n_a, q_a, jnp.asarray(n_b), q_b)
@@ -289,8 +286,7 @@ def directional_diffuse(n_a, n_b, cos_i, cos_r, phi, wavelength_nm, sigma0, tau,
     geo = geometric_factor(v) * shadowing(ci, sigma0, tau, form) * shadowing(cr, sigma0, tau, form)
     cos_loc = jnp.clip(0.5 * jnp.sqrt(v.v2), 0.0, 1.0)
     r, _ = _fresnel_at(n_a, n_b, cos_loc)
-    f2 = jnp.real(r) ** 2 + jnp.imag(r) ** 2
-    return f2 * (geo * d / (math.pi * ci * cr))[None]
+    return abs2(r) * (geo * d / (math.pi * ci * cr))[None]
 
 
 # ----------------------------------------------------------------------------- public
@@ -307,14 +303,6 @@ class HeTorrance(NamedTuple):
     def diffuse(self):
         """Directional plus uniform diffuse BRDF (1/sr)."""
         return self.directional_diffuse + self.uniform_diffuse
-
-
-def _check_angles_deg(name, x, upper=90.0):
-    check_finite(name, x)
-    if is_concrete(x):
-        a = np.asarray(x, dtype=float)
-        if np.any(a < 0) or np.any(a > upper):
-            raise LayerstackError(f"{name} must lie in [0, {upper}] degrees, got range [{a.min()}, {a.max()}]")
 
 
 def check_roughness(sigma_nm, tau_nm) -> None:
@@ -384,8 +372,8 @@ def he_torrance_brdf(
     check_finite("wavelength_nm", wl)
     if is_concrete(wl) and np.any(np.asarray(wl) <= 0):
         raise LayerstackError("wavelength_nm must be > 0")
-    _check_angles_deg("incidence_deg", incidence_deg)
-    _check_angles_deg("viewing_deg", viewing_deg)
+    check_angle_deg("incidence_deg", incidence_deg, grazing=True)
+    check_angle_deg("viewing_deg", viewing_deg, grazing=True)
     check_finite("azimuth_deg", azimuth_deg)
     check_roughness(sigma_nm, tau_nm)
     check_unit_interval("uniform_albedo", uniform_albedo)
@@ -411,7 +399,7 @@ def _he_torrance_core(wl, incidence_deg, viewing_deg, azimuth_deg, n_a, n_b, sig
     ci, co, ph = jnp.cos(ti)[..., None], jnp.cos(to)[..., None], ph[..., None]
     sigma0, tau = sigma_nm.astype(dtype), tau_nm.astype(dtype)
     eta = specular_amplitudes(n_a, n_b, ci, wl, sigma0, tau, form=shadowing_form)
-    spec = jnp.real(eta) ** 2 + jnp.imag(eta) ** 2
+    spec = abs2(eta)
     dd = directional_diffuse(n_a, n_b, ci, co, ph, wl, sigma0, tau, n_terms=n_terms, form=shadowing_form)
     if polarized:
         spec, dd = jnp.moveaxis(spec, 0, -2), jnp.moveaxis(dd, 0, -2)

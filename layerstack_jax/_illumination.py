@@ -5,8 +5,9 @@ packets).
 * :func:`specular` — angle-resolved R, T (front and back) per polarization, at angles in degrees;
 * :func:`diffuse` — hemispherical reflectance and transmittance for Lambertian natural light,
   either side, on the critical-angle-aware nodes of :mod:`layerstack_jax._quadrature`;
-* :func:`snell_invariant` — the one place where an angle of incidence becomes the Snell
-  invariant :math:`s = n_0 \sin\theta_0` that carries it through the stack.
+* :func:`snell_invariant` (from the angle) and :func:`snell_invariant_from_cos` (from its
+  cosine) — the one place where an angle of incidence becomes the Snell invariant
+  :math:`s = n_0 \sin\theta_0` that carries it through the stack.
 
 Result types :class:`Response` (four fields per polarization) and :class:`Diffuse`.
 """
@@ -20,14 +21,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._adding_sums import hemispherical_sums
-from ._custom_types import Array, Float, RealLike
+from ._custom_types import Array, ComplexLike, Float, RealLike, Spectrum
+from ._numerics import sin_from_cos
 from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
 from ._response import Interfaces, natural, stack_interfaces, stack_intensities, thick_layer_parameters, thick_media
 from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check_angle_deg, is_concrete, warn_if_implausible
 
-__all__ = ["Response", "Diffuse", "snell_invariant", "specular", "diffuse", "diffuse_resolved", "natural_T_front",
-           "hemisphere"]
+__all__ = ["Response", "Diffuse", "snell_invariant", "snell_invariant_from_cos", "specular", "diffuse",
+           "diffuse_resolved", "natural_T_front", "hemisphere"]
 
 
 class Response(NamedTuple):
@@ -63,12 +65,20 @@ def _to_public(x):
     return None if x is None else jnp.moveaxis(x, 0, -2)
 
 
-def snell_invariant(n0, angle_rad) -> Float[Array, "*angle wl"]:
+def snell_invariant(n0: ComplexLike, angle_rad: RealLike) -> Float[Array, "*angle wl"]:
     r"""Snell invariant :math:`s = n_0 \sin\theta_0` (Hirayama eq. 2; Simonot eq. 2) of light
     incident at ``angle_rad`` (radians, ``(*angle)``) from the ambient of real index ``n0``
     (scalar, ``(1,)`` or ``(wl,)``): shaped ``(*angle, 1)`` or ``(*angle, wl)``. Every
     :math:`\cos\theta_j` of the stack is derived from it (:mod:`layerstack_jax._fresnel`)."""
     return jnp.real(n0) * jnp.sin(jnp.asarray(angle_rad))[..., None]
+
+
+def snell_invariant_from_cos(n0: ComplexLike, cos: RealLike) -> Float[Array, "*B"]:
+    r"""Snell invariant :math:`s = n_0 \sin\theta_0 = n_0\sqrt{1 - \cos^2\theta_0}` of light whose
+    direction is given by its cosine ``cos`` in a medium of real index ``n0`` (real part taken),
+    e.g. a microfacet's local angle or a table's cosine grid. Unlike :func:`snell_invariant` no
+    wavelength axis is added: the result has the broadcast shape ``(*B)`` of ``n0`` and ``cos``."""
+    return jnp.real(n0) * sin_from_cos(cos)
 
 
 def _snell(rs: ResolvedStack, angle_deg):
@@ -215,7 +225,8 @@ def diffuse(stack: Stack, wavelength_nm, side: str = "front", *, nodes: int = DE
     return diffuse_resolved(resolve(stack, wavelength_nm), side, nodes)
 
 
-def natural_T_front(rs: ResolvedStack, angle_deg):
-    """Natural-light collimated transmittance into the exit medium at ``angle_deg`` (degrees)."""
+def natural_T_front(rs: ResolvedStack, angle_deg) -> Spectrum:
+    """Natural-light collimated transmittance into the exit medium at ``angle_deg`` (degrees,
+    ``(*angle)``), dimensionless, ``(*angle, 1 | wl)``."""
     s = _snell(rs, angle_deg)
     return natural(stack_intensities(rs, s, both_sides=False).T_front)

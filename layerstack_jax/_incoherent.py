@@ -19,11 +19,15 @@ media. Natural light is the mean of s and p taken only at the very end (eqs. 33,
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
+from ._numerics import safe_divide, safe_reciprocal
 
-__all__ = ["slant_path", "beer_rates", "beer_factor", "beer_attenuation_along", "beer_attenuation", "safe_reciprocal", "add_layer"]
+__all__ = ["slant_path", "beer_rates", "beer_factor", "beer_attenuation_along", "beer_attenuation", "add_layer",
+           "add_layers"]
 
 
 def slant_path(n, q):
@@ -46,8 +50,7 @@ def beer_rates(cos_real, im_q, alpha, wavelength):
     (:math:`\operatorname{Re}\cos\theta \le 0`, past its critical angle) the α term and
     :math:`1/\operatorname{Re}\cos\theta` are returned as 0: finite, for the derivatives of
     :mod:`layerstack_jax._adding_sums`, which multiply them by t = 0 there."""
-    ok = cos_real > 0
-    inv_cos = jnp.where(ok, 1.0 / jnp.where(ok, cos_real, 1.0), 0.0)
+    inv_cos = safe_divide(1.0, cos_real)
     kappa = (4 * jnp.pi / wavelength) * im_q
     if alpha is not None:
         kappa = kappa + alpha * inv_cos
@@ -93,12 +96,6 @@ def beer_attenuation(n, q, thickness, alpha, wavelength):
     return beer_attenuation_along(*slant_path(n, q), thickness, alpha, wavelength)
 
 
-def safe_reciprocal(den):
-    """1/den, and 0 where den == 0 (with a finite gradient: the double-where guard)."""
-    ok = den != 0
-    return jnp.where(ok, 1.0 / jnp.where(ok, den, 1.0), 0.0)
-
-
 def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIntensities:
     """Compose two interfaces around a thick layer of single-pass attenuation ``t``.
 
@@ -119,3 +116,13 @@ def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIn
     R_b = below.R_back + below.T_back * below.T_front * above.R_back * t2 * inv
     T_b = below.T_back * above.T_back * t * inv
     return type(above)(R_f, T_f, R_b, T_b)
+
+
+def add_layers(packets: Sequence[PacketIntensities], beer: Sequence) -> PacketIntensities:
+    """Join ``packets`` (L + 1 four-field tuples, in stack order) through the L thick layers
+    between them, of single-pass attenuations ``beer`` (L arrays), by :func:`add_layer` from the
+    top down (Simonot eqs. 59–60). Returns the type of the packets; one packet is returned as is."""
+    total = packets[0]
+    for t, packet in zip(beer, packets[1:]):
+        total = add_layer(total, packet, t)
+    return total

@@ -7,15 +7,19 @@ thicknesses, α(λ) and ρg(λ) computes the complex Fresnel algebra once. Made 
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Optional
 
 import equinox as eqx
 import numpy as np
 
+from ._custom_types import Array, Float, IndexSpectrum, RealLike
 from ._quadrature import DEFAULT_NODES
 from ._response import Interfaces
 from ._stack import ResolvedStack
 from ._validate import LayerstackError, is_concrete
+
+if TYPE_CHECKING:  # _geometry imports this module: the annotation only, no import at run time
+    from ._geometry import Geometry
 
 __all__ = ["Optics", "check_optics", "coherent_films"]
 
@@ -40,13 +44,13 @@ class Optics(eqx.Module):
     are dimensionless (amplitude and intensity ratios; μ = sin²θ nodes and weights).
     """
 
-    geometry: Any  # the Geometry it was made for (layerstack_jax._geometry imports this module)
+    geometry: Geometry  # the Geometry it was made for
     incidence: Optional[Interfaces]
     viewing: Optional[Interfaces]
     diffuse: Optional[Interfaces]
-    weights: Optional[Any]  # (node, 1 | wl) quadrature weights, dimensionless
-    index: tuple
-    films: tuple
+    weights: Optional[Float[Array, "node wl"]]  # (node, 1 | wl) quadrature weights, dimensionless
+    index: tuple[IndexSpectrum, ...]  # indices of the media, ambient first
+    films: tuple[RealLike, ...]  # thicknesses of the coherent films, nm
     nodes: int = eqx.field(static=True, default=DEFAULT_NODES)
     reach: Optional[tuple] = eqx.field(static=True, default=None)
 

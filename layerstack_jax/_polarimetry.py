@@ -58,21 +58,19 @@ depolarizes partially (:math:`|X|^2 < R_s R_p`).
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import jax.numpy as jnp
 import numpy as np
 
-from ._coherent import packet_amplitudes
-from ._custom_types import Array, Float, RealLike
-from ._ellipsometry import _check_angle_deg
-from ._fresnel import normal_wavevector, power_flux, safe_divide
-from ._geometry import _diffuse_resolved
-from ._incoherent import add_layer, beer_attenuation
+from ._coherent import PacketIntensities, packet_amplitudes
+from ._custom_types import Array, Float, RealLike, Spectrum
+from ._fresnel import exit_medium_ratio, normal_wavevector, power_flux
+from ._illumination import diffuse_resolved, snell_invariant
+from ._incoherent import add_layers, beer_attenuation
+from ._numerics import safe_divide, safe_sqrt
 from ._quadrature import DEFAULT_NODES
 from ._response import stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
-from ._validate import LayerstackError
+from ._validate import LayerstackError, check_angle_deg
 
 __all__ = [
     "PAULI",
@@ -119,30 +117,29 @@ def stokes(state: str):
 
 
 def _angles(incidence_deg, viewing_deg):
-    _check_angle_deg("incidence_deg", incidence_deg)
-    _check_angle_deg("viewing_deg", viewing_deg)
+    incidence_deg = check_angle_deg("incidence_deg", incidence_deg)
+    viewing_deg = check_angle_deg("viewing_deg", viewing_deg)
     i, v = jnp.broadcast_arrays(jnp.asarray(incidence_deg, dtype=float), jnp.asarray(viewing_deg, dtype=float))
     return jnp.deg2rad(i), jnp.deg2rad(v)
 
 
 def _T_pol(rs: ResolvedStack, angle_rad):
     """Collimated transmittance per polarization, shaped ``(2, *angle, wl)``."""
-    s = jnp.real(rs.n[0]) * jnp.sin(angle_rad)[..., None]
+    s = snell_invariant(rs.n[0], angle_rad)
     T = stack_intensities(rs, s, both_sides=False).T_front
     return jnp.broadcast_to(T, (2, *jnp.shape(angle_rad), rs.wavelength.shape[-1]))
 
 
-def _background_factor(stack: Stack, rs: ResolvedStack, nodes: int):
+def _background_factor(stack: Stack, rs: ResolvedStack, nodes: int) -> Spectrum:
     r""":math:`K = (n_0/n_g)^2 \rho_g / (\pi (1 - \rho_g r_b))`, shaped ``(wl,)``."""
     if not isinstance(stack.exit, LambertianBackground):
         raise LayerstackError(
             "exit: a polarized BRDF / diffuse Mueller matrix needs a LambertianBackground "
             "(a specular substrate has no diffuse part; use specular_mueller)"
         )
-    r_b = _diffuse_resolved(rs, "back", nodes).r
+    r_b = diffuse_resolved(rs, "back", nodes).r
     rho = rs.rho_g
-    ratio = (jnp.real(rs.n[0]) / jnp.real(rs.n[-1])) ** 2
-    return ratio * rho / (jnp.pi * (1.0 - rho * r_b))
+    return exit_medium_ratio(rs.n[0], rs.n[-1]) * rho / (jnp.pi * (1.0 - rho * r_b))
 
 
 def polarized_brdf(
@@ -201,14 +198,8 @@ def diffuse_mueller(
 
 
 # ------------------------------------------------------------------ specular: s–p correlations
-class _Correlations(NamedTuple):
-    """Like :class:`~layerstack_jax._coherent.PacketIntensities`, with a leading axis of 3:
-    ``(|a_s|², |a_p|², a_p ā_s)`` (complex dtype) instead of ``(s, p)``."""
-
-    R_front: object
-    T_front: object
-    R_back: object
-    T_back: object
+# The correlations of a packet travel in a PacketIntensities whose leading axis is 3,
+# (|a_s|², |a_p|², a_p ā_s) (complex dtype), instead of (s, p): the adding rule is the same.
 
 
 def _triple(a_s, a_p, w_s=1.0, w_p=1.0):
@@ -221,7 +212,7 @@ def _flux_ratio(n_to, q_to, n_from, q_from):
     return jnp.maximum(ratio, 0.0)
 
 
-def _packet_correlations(n, d, s, wl, both_sides: bool) -> _Correlations:
+def _packet_correlations(n, d, s, wl, both_sides: bool) -> PacketIntensities:
     gamma, tau, q = packet_amplitudes(n, d, s, wl)
     n_first = jnp.asarray(n[0]).astype(q.dtype)
     n_last = jnp.asarray(n[-1]).astype(q.dtype)
@@ -229,10 +220,10 @@ def _packet_correlations(n, d, s, wl, both_sides: bool) -> _Correlations:
     R_f = _triple(gamma[0], gamma[1])
     T_f = _triple(tau[0], tau[1], f[0], f[1])
     if not both_sides:
-        return _Correlations(R_f, T_f, None, None)
+        return PacketIntensities(R_f, T_f, None, None)
     gamma_b, tau_b, _ = packet_amplitudes(tuple(n)[::-1], tuple(d)[::-1], s, wl)
     fb = _flux_ratio(n_first, q[0], n_last, q[-1])
-    return _Correlations(R_f, T_f, _triple(gamma_b[0], gamma_b[1]), _triple(tau_b[0], tau_b[1], fb[0], fb[1]))
+    return PacketIntensities(R_f, T_f, _triple(gamma_b[0], gamma_b[1]), _triple(tau_b[0], tau_b[1], fb[0], fb[1]))
 
 
 def _front_reflection_correlations(rs: ResolvedStack, s):
@@ -240,16 +231,11 @@ def _front_reflection_correlations(rs: ResolvedStack, s):
     wl = rs.wavelength
     thick = thick_media(rs.coherent)
     sides = len(thick) > 2
-    total = None
-    for a, b in zip(thick[:-1], thick[1:]):
-        packet = _packet_correlations(rs.n[a : b + 1], rs.d[a : b - 1], s, wl, sides)
-        if total is None:
-            total = packet
-            continue
-        n_a = rs.n[a]
-        t = beer_attenuation(n_a, normal_wavevector(n_a, s), rs.d[a - 1], rs.alpha[a - 1], wl)
-        total = add_layer(total, packet, t)
-    return total.R_front
+    packets = [_packet_correlations(rs.n[a : b + 1], rs.d[a : b - 1], s, wl, sides)
+               for a, b in zip(thick[:-1], thick[1:])]
+    beer = [beer_attenuation(rs.n[a], normal_wavevector(rs.n[a], s), rs.d[a - 1], rs.alpha[a - 1], wl)
+            for a in thick[1:-1]]
+    return add_layers(packets, beer).R_front
 
 
 def _reflection_mueller(R_s, R_p, X):
@@ -297,10 +283,10 @@ def specular_mueller(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Float[
     Returns:
         ``(*angle, 4, 4, wl)``.
     """
-    _check_angle_deg("angle_deg", angle_deg)
+    angle_deg = check_angle_deg("angle_deg", angle_deg)
     rs = resolve(stack, wavelength_nm)
     th = jnp.deg2rad(jnp.asarray(angle_deg, dtype=float))
-    s = jnp.real(rs.n[0]) * jnp.sin(th)[..., None]
+    s = snell_invariant(rs.n[0], th)
     c = _front_reflection_correlations(rs, s)
     c = jnp.broadcast_to(c, (3, *jnp.shape(th), rs.wavelength.shape[-1]))
     return _reflection_mueller(jnp.real(c[0]), jnp.real(c[1]), c[2])
@@ -335,9 +321,7 @@ def degree_of_polarization(S):
     S = jnp.asarray(S)
     I = S[..., 0, :]
     p2 = jnp.sum(S[..., 1:, :] ** 2, axis=-2)
-    pos = p2 > 0
-    p = jnp.where(pos, jnp.sqrt(jnp.where(pos, p2, 1.0)), 0.0)
-    return safe_divide(p, I)
+    return safe_divide(safe_sqrt(p2), I)
 
 
 def coherency_matrix(M):

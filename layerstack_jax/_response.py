@@ -16,7 +16,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from ._coherent import PacketIntensities, stack_packets
-from ._incoherent import add_layer, beer_attenuation_along, slant_path
+from ._custom_types import Array, Float, Inexact
+from ._incoherent import add_layers, beer_attenuation_along, slant_path
 from ._stack import ResolvedStack
 
 __all__ = ["thick_media", "Interfaces", "stack_interfaces", "thick_layer_parameters", "beer_factors", "join_interfaces", "stack_intensities", "natural"]
@@ -37,8 +38,8 @@ class Interfaces(NamedTuple):
     (packets) and ``(*batch, wl)`` (paths).
     """
 
-    packets: tuple
-    paths: tuple
+    packets: tuple[PacketIntensities, ...]
+    paths: tuple[tuple[Float[Array, "*batch wl"], Float[Array, "*batch wl"]], ...]
 
 
 def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interfaces:
@@ -72,9 +73,7 @@ def beer_factors(rs: ResolvedStack, paths: tuple) -> tuple:
 def join_interfaces(rs: ResolvedStack, interfaces: Interfaces, *, both_sides: bool = True) -> PacketIntensities:
     """Join the packets through the thick layers of ``rs`` (Beer attenuation with the layers'
     thicknesses and α, then the adding rule, Simonot eqs. 59–60)."""
-    total = interfaces.packets[0]
-    for t, packet in zip(beer_factors(rs, interfaces.paths), interfaces.packets[1:]):
-        total = add_layer(total, packet, t)
+    total = add_layers(interfaces.packets, beer_factors(rs, interfaces.paths))
     if not both_sides:
         total = PacketIntensities(total.R_front, total.T_front, None, None)
     return total
@@ -96,6 +95,6 @@ def stack_intensities(rs: ResolvedStack, s, *, both_sides: bool = True) -> Packe
     return join_interfaces(rs, stack_interfaces(rs, s, both_sides=both_sides), both_sides=both_sides)
 
 
-def natural(x):
+def natural(x: Inexact[Array, "pol *batch"]) -> Inexact[Array, "*batch"]:
     """Natural (unpolarized) light: mean over the leading polarization axis (Simonot eqs. 33, 57)."""
     return 0.5 * (x[0] + x[1])

@@ -54,13 +54,13 @@ import jax.numpy as jnp
 import jax.scipy.special as jsp
 import numpy as np
 
-from ._custom_types import Array, Float, RealLike
-from ._ellipsometry import _check_angle_deg
-from ._illumination import diffuse_resolved as _diffuse_resolved
+from ._custom_types import Array, Float, RealLike, Spectrum
+from ._fresnel import exit_medium_ratio
+from ._illumination import diffuse_resolved, snell_invariant_from_cos
 from ._quadrature import DEFAULT_NODES, unit_rule
 from ._response import natural, stack_intensities
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, check_finite, is_concrete
+from ._validate import LayerstackError, check_angle_deg, check_finite, is_concrete
 
 __all__ = ["RoughBRDF", "rough_brdf", "microfacet_distribution", "smith_lambda"]
 
@@ -127,8 +127,7 @@ def smith_lambda(cos_v, alpha, distribution: str = "ggx"):
 
 def _natural_R_T(rs: ResolvedStack, cos_d):
     """Natural-light R and T of the stack at facet incidence cosine ``cos_d`` (``(*B)``) → ``(*B, wl)``."""
-    sin_d = jnp.sqrt(jnp.clip(1.0 - cos_d * cos_d, 0.0, 1.0))
-    out = stack_intensities(rs, jnp.real(rs.n[0]) * sin_d[..., None], both_sides=False)
+    out = stack_intensities(rs, snell_invariant_from_cos(rs.n[0], cos_d[..., None]), both_sides=False)
     return natural(out.R_front), natural(out.T_front)
 
 
@@ -173,7 +172,7 @@ def _rough_transmittance(rs: ResolvedStack, theta, *, alpha, distribution: str, 
     return num / den
 
 
-def _rough_background_factor(rs: ResolvedStack, E, nodes: int):
+def _rough_background_factor(rs: ResolvedStack, E, nodes: int) -> Spectrum:
     r""":math:`K` of the diffuse part with the rough top's back-side reflectance, ``(wl,)``.
 
     The rough top changes the diffuse exchange with the background: its diffuse front
@@ -184,11 +183,11 @@ def _rough_background_factor(rs: ResolvedStack, E, nodes: int):
     energy bookkeeping, :math:`r_b' = 1 - t_b'`, which makes the white-furnace albedo
     :math:`\le 1`; as α → 0, :math:`E \to \bar T` and :math:`r_b' \to r_b`.
     """
-    d = _diffuse_resolved(rs, "back", nodes)
+    d = diffuse_resolved(rs, "back", nodes)
     x, w = unit_rule(nodes)
     theta = jnp.arcsin(jnp.sqrt(jnp.asarray(x)))
     t_f = jnp.sum(jnp.asarray(w)[:, None] * E(theta), axis=0)
-    ratio = (jnp.real(rs.n[0]) / jnp.real(rs.n[-1])) ** 2
+    ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
     t_b = ratio * t_f
     r_b = jnp.clip(d.r + d.t - t_b, 0.0, 1.0)
     rho = rs.rho_g
@@ -230,9 +229,9 @@ def rough_brdf(
     """
     if distribution not in _DISTRIBUTIONS:
         raise LayerstackError(f"distribution must be one of {_DISTRIBUTIONS}, got {distribution!r}")
-    _check_angle_deg("incidence_deg", incidence_deg)
-    _check_angle_deg("viewing_deg", viewing_deg)
-    check_finite("azimuth_deg", azimuth_deg)
+    incidence_deg = check_angle_deg("incidence_deg", incidence_deg)
+    viewing_deg = check_angle_deg("viewing_deg", viewing_deg)
+    azimuth_deg = check_finite("azimuth_deg", azimuth_deg)
     if is_concrete(roughness) and np.any(np.asarray(roughness) <= 0):
         raise LayerstackError("roughness must be > 0 (use the smooth functions for a mirror-flat top)")
     rs = resolve(stack, wavelength_nm)

@@ -39,7 +39,8 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.design_case
 
 notebooks: $(STAMP)
-	$(PY) notebooks/render.py
+	# each notebooks/NN_*.py read by jupytext, executed by nbclient on an ipykernel kernel; writes NN_*.md and figures/
+	$(PY) notebooks/execute.py
 
 docs: $(STAMP)
 	# the site from mkdocs.yml: pages under docs/, the API reference from the docstrings (mkdocstrings)

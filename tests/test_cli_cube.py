@@ -168,13 +168,13 @@ def _single(h, alpha, q):
 def test_predict_vary_outer_product_equals_single_stacks(tmp_path):
     (tmp_path / "s.toml").write_text(VARNISH)
     out = tmp_path / "v.csv"
-    assert main(["predict", str(tmp_path / "s.toml"), "-g", "specular:0", "-w", "400:700:10", "-o", str(out),
-                 "--vary", "varnish.thickness_nm=1e4:3e4:1e4", "--vary", "varnish.alpha_per_nm=1e-5,4e-5",
+    assert main(["predict", str(tmp_path / "s.toml"), "-g", "specular:0:R", "-g", "specular:0:T", "-w", "400:700:10",
+                 "-o", str(out), "--vary", "varnish.thickness_nm=1e4:3e4:1e4", "--vary", "varnish.alpha_per_nm=1e-5,4e-5",
                  "--digits", "17"]) == 0
     header, values = _read_csv(out)
     np.testing.assert_array_equal(values[:, 0], WL)
     expected_names = []
-    for q in ("R", "T", "A"):
+    for q in ("R", "T"):  # one column per geometry and sample: geometries outer, the last --vary fastest
         for h in (10000, 20000, 30000):
             for a in ("1e-05", "4e-05"):
                 expected_names.append(f"{q}_0 varnish.thickness_nm={h} varnish.alpha_per_nm={a}")
@@ -210,3 +210,27 @@ def test_predict_vary_errors_name_the_field(tmp_path, capsys, vary, message):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err and vary.split("=")[0] in err
     assert not (tmp_path / "e.csv").exists()
+
+
+def test_mask_formats_and_envi_geometry_metadata(tmp_path):
+    """The mask readers (npy, zarr, one-band ENVI) agree; a mask that is not 0/1 is refused;
+    an ENVI header's ``geometry`` key is what the cube states."""
+    import xarray as xr
+
+    from layerstack_cli._cube import _read_mask, _stated_geometry
+    from layerstack_jax import open_cube
+
+    envi = pytest.importorskip("spectral.io.envi")
+    mask = np.ones((NY, NX), bool)
+    mask[MASKED_PIXEL] = False
+    np.save(tmp_path / "m.npy", mask.astype(np.uint8))
+    xr.Dataset({"keep": (("y", "x"), mask)}).to_zarr(tmp_path / "m.zarr", consolidated=False)
+    envi.save_image(str(tmp_path / "m.hdr"), mask.astype(np.uint8)[..., None])
+    for name in ("m.npy", "m.zarr", "m.hdr"):
+        np.testing.assert_array_equal(_read_mask(str(tmp_path / name), (NY, NX)), mask, err_msg=name)
+    np.save(tmp_path / "bad.npy", np.full((NY, NX), 2))
+    with pytest.raises(ls.LayerstackError, match=r"bad.npy: mask values must be true/false or 1/0"):
+        _read_mask(str(tmp_path / "bad.npy"), (NY, NX))
+    envi.save_image(str(tmp_path / "c.hdr"), CUBE[..., :3].astype(np.float32),
+                    metadata={"wavelength": [400, 410, 420], "wavelength units": "nm", "geometry": "45/0"})
+    assert _stated_geometry(open_cube(tmp_path / "c.hdr"), str(tmp_path / "c.hdr")) == ["45/0"]

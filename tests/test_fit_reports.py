@@ -262,3 +262,28 @@ def test_reasons_are_in_the_librarys_words(alpha_objective):
     r = ft.fit(obj, data=[y[None]], max_steps=1, method="gauss-newton")
     assert not r.converged and r.reason.startswith("not converged: the step limit (max_steps)")
     assert "NO — not converged" in r.report() and "did not converge" in r.report()
+
+
+def test_lookup_start_picks_the_nearest_tabulated_spectrum_and_fits_the_same(alpha_objective):
+    """fit_batch(start="lookup"): each fit starts from the tabulated point whose spectrum is
+    nearest its data (checked against a direct search over the table) and finds the true α.
+    From the objective's single start (α = 5e-6) the densest slab (α = 9e-5) is lost: LM's first
+    step lowers the cost by jumping to the opaque plateau (α ≈ 0.47, T ≈ 0, no gradient), and the
+    fit, 'converged' there, carries an implausible χ² (≫ 1 with σ given) that says so."""
+    from fitting._batch import LookupTable
+
+    obj, _ = alpha_objective
+    alphas = np.array([1e-6, 8e-6, 3e-5, 9e-5])
+    data = np.stack([_T(10_000.0, a) for a in alphas])
+    table = LookupTable(obj, 32)
+    starts = table.nearest((data[:, None, :],), (np.full((4, 1, WL.size), 1 / SIGMA),))
+    direct = [table.points[np.argmin([np.sum((_T(10_000.0, p[0]) - y) ** 2) for p in table.points])] for y in data]
+    np.testing.assert_array_equal(starts, np.array(direct))
+    a = ft.fit_batch(obj, data, start="lookup", lookup_size=32)
+    b = ft.fit_batch(obj, data)
+    assert a.converged.all() and b.converged.all()
+    np.testing.assert_allclose(a.values["alpha[slab]"], alphas, rtol=1e-7)
+    np.testing.assert_allclose(b.values["alpha[slab]"][:3], alphas[:3], rtol=1e-7)
+    assert a.reduced_chi2[3] < 1e-6 and b.reduced_chi2[3] > 1e3
+    with pytest.raises(ls.LayerstackError, match="start must be"):
+        ft.fit_batch(obj, data, start="table")

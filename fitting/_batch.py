@@ -32,8 +32,8 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import (HOST_METHODS, SolverOptions, bound_note, compiled_fit, multistart_points, settle_on_bounds,
-                     starting_point)
+from ._solve import (HOST_METHODS, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
+                     settle_on_bounds, starting_point)
 from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
 from ._status import CONVERGED, INVALID_DATA, result_message
 
@@ -182,6 +182,16 @@ class LookupTable:
         model = jax.jit(lambda X: jax.lax.map(lambda x: objective.predict(x, objective.optics), X, batch_size=16))
         self.spectra = tuple(np.asarray(m).reshape(size, -1) for m in model(jnp.asarray(self.points)))
 
+    @classmethod
+    def of(cls, objective: Objective, size: int = 256, seed: int = 0) -> "LookupTable":
+        """The table of ``objective``, made once and kept with its compiled solvers (the
+        regions of a cube fit reuse it)."""
+        cache = compiled_cache(objective)
+        key = ("lookup", size, seed)
+        if key not in cache:
+            cache[key] = cls(objective, size, seed)
+        return cache[key]
+
     def nearest(self, ys, ws) -> np.ndarray:
         """``(N, P)`` physical starting points for data ``ys`` with weights ``ws`` (one
         ``(N, samples, wl)`` array per dataset each)."""
@@ -251,7 +261,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         ws = tuple(jnp.concatenate([w, jnp.broadcast_to(w[:1], (pad,) + w.shape[1:])]) for w in ws)
     if start not in ("objective", "lookup"):
         raise LayerstackError(f"start must be 'objective' or 'lookup', got {start!r}")
-    table = LookupTable(objective, lookup_size) if start == "lookup" else None
+    table = LookupTable.of(objective, lookup_size) if start == "lookup" else None
     y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)

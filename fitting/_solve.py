@@ -172,7 +172,8 @@ def _status(result, x):
 
 
 # --------------------------------------------------------------------------- compiled solves
-def _cache(objective: Objective) -> dict:
+def compiled_cache(objective: Objective) -> dict:
+    """What is compiled or precomputed for ``objective`` (solvers, lookup tables), kept with it."""
     c = objective.__dict__.get("_compiled")
     if c is None:
         c = objective.__dict__["_compiled"] = {}
@@ -325,7 +326,7 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
     split over them (sharding of the fits' axis; the block is padded to a multiple of the device
     count). Compiled once per objective, options and batching; cached on the objective."""
     key = ("fit", o, batched, block if batched else None)
-    cache = _cache(objective)
+    cache = compiled_cache(objective)
     if key not in cache and o.method in HOST_METHODS:
         cache[key] = _host_fit(objective, o, batched)
     if key not in cache:

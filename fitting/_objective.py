@@ -9,8 +9,11 @@ the free :class:`~fitting.Parameter` s and one or several datasets (several geom
 CIELAB colours of a colorimeter through a :class:`layerstack_jax.ColourSpace`, the bare background).
 
 Residuals (model − data, weighted): for each dataset,
-:math:`r = m\,w\,(f(\lambda; x) - y)` with :math:`w = 1/\sigma` (or the given weights, default 1)
-and :math:`m \in \{0, 1\}` the mask, flattened and concatenated over datasets, followed by the
+:math:`r = m\,w\,(f(\lambda; x) \ominus y)` with :math:`w = 1/\sigma` (or the given weights, default 1)
+and :math:`m \in \{0, 1\}` the mask, where :math:`f \ominus y` is the geometry's own
+:meth:`~layerstack_jax.Geometry.residual` — the difference :math:`f - y`, or for an
+ellipsometer's Δ the difference wrapped into (−180°, 180°] (a Δ crossing ±180° is compared on
+the circle; CIELAB datasets use the plain difference), flattened and concatenated over datasets, followed by the
 smoothness penalties :math:`\sqrt{\mu}\,\Delta^2 (B c)` of spectral parameters. The model
 :math:`f` is the public forward function :func:`layerstack_jax.reflectance` applied to the
 template stack with the parameters put in by ``equinox.tree_at`` — one stack per sample, vmapped.
@@ -32,6 +35,7 @@ import numpy as np
 
 from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LambertianBackground, LayerstackError,
                             LayerstackWarning, Stack, fixed_optics, reflectance)
+from layerstack_jax._stack import TabulatedSpectrum
 
 from ._parameters import Layout, Parameter, resolve_parameter
 
@@ -60,6 +64,51 @@ def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
     if path[:1] == ("layers",) and len(path) == 3:
         return path[2] == "alpha" or (path[2] == "thickness" and not stack.layers[path[1]].coherent)
     return path == ("exit", "reflectance") and isinstance(stack.exit, LambertianBackground)
+
+
+def _has_range(x) -> bool:
+    """A material or spectrum known only over a wavelength range (a table, a database formula)."""
+    return isinstance(x, TabulatedSpectrum) or hasattr(type(x), "data_range_nm")
+
+
+def _data_range(x) -> tuple:
+    if isinstance(x, TabulatedSpectrum):
+        return float(x.wavelength_nm[0]), float(x.wavelength_nm[-1])
+    return x.data_range_nm
+
+
+def _where(stack: Stack, path) -> str:
+    """``layers[1] (TiO2): index`` … for a key path into ``stack``."""
+    keys = [getattr(k, "name", getattr(k, "idx", getattr(k, "key", k))) for k in path]
+    if len(keys) >= 2 and keys[0] == "layers" and isinstance(keys[1], int):
+        layer = stack.layers[keys[1]]
+        rest = ".".join(str(k) for k in keys[2:]) or "index"
+        return f"layers[{keys[1]}] ({layer.name or 'unnamed'}): {rest}"
+    if keys[:2] == ["exit", "reflectance"]:
+        return "background reflectance rho_g"
+    return (" ".join(str(k) for k in keys[:1]) + " " + ".".join(str(k) for k in keys[1:])).strip()
+
+
+def check_table_ranges(stack: Stack, grid) -> None:
+    """Raise :class:`LayerstackError` when a model wavelength ``grid`` (nm, ``(wl,)``) lies
+    outside the range of a tabulated material, database formula or tabulated spectrum of
+    ``stack``, naming the layer (or medium), the material and both ranges. Run once when an
+    :class:`Objective` is built: inside a compiled solve the same error surfaces only as an
+    opaque runtime callback failure."""
+    g = np.asarray(grid, dtype=float)
+    leaves, _ = jax.tree_util.tree_flatten_with_path(stack, is_leaf=_has_range)
+    for path, leaf in leaves:
+        if not _has_range(leaf):
+            continue
+        lo, hi = _data_range(leaf)
+        out = (g < lo - 1e-9) | (g > hi + 1e-9)
+        if np.any(out):
+            raise LayerstackError(
+                f"{_where(stack, path)}: material {getattr(leaf, 'name', type(leaf).__name__)!r} has data for "
+                f"{lo:g}–{hi:g} nm only, but the model grid spans {g.min():g}–{g.max():g} nm ({int(out.sum())} of "
+                f"{g.size} model wavelengths outside, e.g. {g[out][0]:g} nm): narrow the model grid or choose a "
+                "material source that covers it (nothing is extrapolated)"
+            )
 
 
 def _bare(stack: Stack) -> Stack:
@@ -311,6 +360,7 @@ class Objective:
         if n_samples is None:
             d0 = np.asarray(next((ds for ds in datasets if not ds.bare), datasets[0]).data)
             n_samples = 1 if d0.ndim == 1 else d0.shape[0]
+        check_table_ranges(stack, grid)  # here, not as an opaque runtime error inside the solve
         prepared = [_prepare(ds, grid, n_samples, i) for i, ds in enumerate(datasets)]
         self.stack = stack
         self.wavelength = grid
@@ -465,11 +515,15 @@ class Objective:
         return jnp.concatenate(out) if out else jnp.zeros((0,), dtype=x.dtype)
 
     def weighted_residuals(self, x, args, optics=None, *, model=None):
-        """Data residuals ``w (f − y)`` per dataset, ``(samples, wl)`` each (0 at masked points).
+        """Data residuals ``w · residual(f, y)`` per dataset, ``(samples, wl)`` each (0 at masked
+        points), with ``residual`` the dataset geometry's :meth:`~layerstack_jax.Geometry.residual`
+        (``f − y``; wrapped into (−180°, 180°] for an ellipsometer's Δ) — the one place data
+        residuals are made (the solvers and the statistics call it).
         ``model``: :meth:`predict` of ``x`` when the caller already has it."""
         data, weight = args
         model = self.predict(x, optics) if model is None else model
-        return tuple(w * (f - y) for f, y, w in zip(model, data, weight))
+        return tuple(w * (f - y if ds.colour is not None else ds.geometry.residual(f, y))
+                     for ds, f, y, w in zip(self.datasets, model, data, weight))
 
     def residuals(self, x, args, optics=None):
         """Flat residual vector: weighted data residuals, then smoothness penalties."""

@@ -249,6 +249,11 @@ class DatabaseFormula(Material):
             raise LayerstackError(f"{self.name}: formula number must be 1–9, got {self.kind}")
         check_nonnegative(f"{self.name}.k", self.k, "(extinction coefficient) must be >= 0 (convention n + ik)")
 
+    @property
+    def data_range_nm(self) -> tuple:
+        """``(min, max)`` in nm: the range the material can be evaluated on (``range_nm``)."""
+        return (float(self.range_nm[0]), float(self.range_nm[1]))
+
     def __call__(self, wavelength_nm):
         x = _range_checked(wavelength_nm, *self.range_nm, self.name)
         n = _formula_n(self.kind, self.coefficients, x * 1e-3)

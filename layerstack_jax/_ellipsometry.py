@@ -38,10 +38,26 @@ module:
   (pyElli's ``Result.rho`` is the same number); the instruments' complex ratio
   :math:`\tan\psi\,e^{i\Delta}` is its complex conjugate.
 
-For fitting, the wrap-free combinations :math:`N = \cos 2\psi`,
-:math:`C = \sin 2\psi\cos\Delta`, :math:`S = \sin 2\psi \sin\Delta` (what rotating-compensator
-instruments measure, with the same Δ) are smooth everywhere, where Δ jumps at ±180°. The
-normalized Mueller matrix of the reflection is
+Fitting ellipsometric data: three residual kinds
+------------------------------------------------
+:class:`Ellipsometric` is the measurement geometry of a fit (``fitting.Dataset``); its
+``quantity`` chooses what is compared with the data, and :meth:`Ellipsometric.residual` how:
+
+* ``'psi'``, ``'delta'`` (degrees): ψ/Δ. The Δ residual is the model−data difference wrapped
+  into (−180°, 180°] (:func:`wrap_degrees`): a Δ that crosses ±180° within a spectrum, or
+  data reported in [0°, 360°), is compared on the circle, not across a 360° jump.
+* ``'N'``, ``'C'``, ``'S'``: the wrap-free combinations :math:`N = \cos 2\psi`,
+  :math:`C = \sin 2\psi\cos\Delta`, :math:`S = \sin 2\psi \sin\Delta` (what rotating-compensator
+  instruments measure, with the same Δ), smooth everywhere.
+* ``'rho_re'``, ``'rho_im'``: real and imaginary parts of
+  :math:`\rho = r_p/r_s = \tan\psi\,e^{-i\Delta}` — the library's one ρ convention (the same
+  number as :attr:`Ellipsometry.rho`, ``Measurement.rho()`` and pyElli's ``Result.rho``), so
+  :math:`\mathrm{Re}\,\rho = \tan\psi\cos\Delta`, :math:`\mathrm{Im}\,\rho = -\tan\psi\sin\Delta`
+  with the instruments' Δ. Wrap-free as well; large where ψ → 90°.
+
+Δ, S and Im ρ change sign with Δ (:attr:`Ellipsometric.odd_in_delta`): a file written in the
+opposite Δ convention fits far better mirrored, which ``fitting`` reports. The normalized
+Mueller matrix of the reflection is
 :math:`[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`, as measured
 (:mod:`layerstack_jax._polarimetry`).
 """
@@ -60,7 +76,10 @@ from ._custom_types import Array, Complex, Float, RealLike
 from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, is_concrete
 
-__all__ = ["Ellipsometry", "ellipsometry", "reflection_amplitudes", "psi_delta"]
+__all__ = ["Ellipsometry", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
+
+#: the quantities an :class:`Ellipsometric` geometry reads (one per dataset)
+QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im")
 
 
 class Ellipsometry(NamedTuple):
@@ -92,6 +111,21 @@ class Ellipsometry(NamedTuple):
     def S(self):
         r""":math:`\sin 2\psi \sin\Delta` (smooth, for fitting)."""
         return jnp.sin(2 * jnp.deg2rad(self.psi_deg)) * jnp.sin(jnp.deg2rad(self.delta_deg))
+
+
+def wrap_degrees(angle_deg):
+    r"""An angle difference in degrees wrapped into (−180°, 180°]: ``180 - ((180 - x) mod 360)``.
+
+    ``angle_deg``: any shape (degrees); returns the same shape. Used for Δ residuals
+    (:meth:`Ellipsometric.residual`): 350° − (−5°) = 355° is −5°, not 355°.
+
+    Differentiable: away from the odd multiples of 180° it is :math:`x - 360°k` with a locally
+    constant integer k, so its derivative is exactly 1 (JAX's ``remainder`` has derivative 1 in
+    its first argument) — no trigonometry, no division, no NaN. At ±180° the wrapped value jumps
+    from 180° to −180°, but the least-squares cost (its square) is continuous there: the
+    residual of a point whose model and data are opposite on the circle is 180° either way.
+    """
+    return 180.0 - jnp.remainder(180.0 - jnp.asarray(angle_deg), 360.0)
 
 
 def _safe_atan2(y, x):
@@ -195,26 +229,31 @@ class Ellipsometric(Geometry):
     """An ellipsometer's reading at ``angle_deg`` (degrees), as a measurement geometry: lets
     ψ/Δ spectra be fitted (``fitting.Dataset(Ellipsometric(70, "psi"), data)``).
 
-    ``quantity``: ``'psi'`` or ``'delta'`` (degrees, conventions of :func:`ellipsometry`), or the
-    wrap-free ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (better fitting
-    targets: Δ jumps at ±180°).
+    ``quantity`` (one per dataset; "Fitting ellipsometric data" in the module docstring):
+
+    * ``'psi'`` or ``'delta'``: degrees, conventions of :func:`ellipsometry`; the Δ residual of
+      a fit is wrapped into (−180°, 180°] (:meth:`residual`), so Δ data may cross ±180° or be
+      reported in [0°, 360°);
+    * ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (dimensionless, wrap-free);
+    * ``'rho_re'``, ``'rho_im'``: Re and Im of ρ = r_p/r_s = tan ψ e^{−iΔ} (dimensionless,
+      wrap-free; the convention of :attr:`Ellipsometry.rho` and ``Measurement.rho()``).
 
     ``angle_deg``: scalar or array ``(*angle)`` of incidence angles in degrees; :meth:`measure`
-    returns ``(*angle, wl)`` (ψ, Δ in degrees; N, C, S dimensionless).
+    returns ``(*angle, wl)``.
     """
 
     angle_deg: object = 70.0
     quantity: str = eqx.field(static=True, default="psi")
 
     def __check_init__(self):
-        if self.quantity not in ("psi", "delta", "N", "C", "S"):
+        if self.quantity not in QUANTITIES:
             raise LayerstackError(
-                f"Ellipsometric.quantity must be 'psi', 'delta', 'N', 'C' or 'S', got {self.quantity!r}"
+                f"Ellipsometric.quantity must be one of {', '.join(map(repr, QUANTITIES))}, got {self.quantity!r}"
             )
         _check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
 
-    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S"
-    signed: ClassVar[bool] = True  # Δ, C, S may be negative
+    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im"
+    signed: ClassVar[bool] = True  # Δ, C, S, Re ρ, Im ρ may be negative
     reads_diffuse_light: ClassVar[bool] = False
     reading_is_fraction: ClassVar[bool] = False
 
@@ -222,7 +261,24 @@ class Ellipsometric(Geometry):
         """The quantity read for ``stack`` on ``wavelength_nm`` (nm); ``nodes`` and ``optics``
         are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
         e = ellipsometry(stack, wavelength_nm, self.angle_deg)
+        if self.quantity == "rho_re":
+            return jnp.real(e.rho)
+        if self.quantity == "rho_im":
+            return jnp.imag(e.rho)
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
+
+    def residual(self, model, data):
+        """Model − data; for ``'delta'`` wrapped into (−180°, 180°] by :func:`wrap_degrees`
+        (derivative 1 in ``model``, NaN-free), so that Δ = 179° against data −179° is a 2° miss."""
+        if self.quantity == "delta":
+            return wrap_degrees(model - data)
+        return model - data
+
+    @property
+    def odd_in_delta(self) -> bool:
+        """True when the reading changes sign with Δ (Δ, S, Im ρ): data written in the opposite
+        Δ convention are these readings negated (ψ, N, C, Re ρ are even in Δ)."""
+        return self.quantity in ("delta", "S", "rho_im")
 
     # the Geometry interface: an ellipsometer needs no Optics (it overrides measure)
     def optics(self, rs, background, nodes):
@@ -240,16 +296,19 @@ class Ellipsometric(Geometry):
     @property
     def quantity_label(self) -> str:
         return {"psi": "psi (degrees)", "delta": "Delta (degrees)", "N": "N = cos 2psi", "C": "C = sin 2psi cos Delta",
-                "S": "S = sin 2psi sin Delta"}[self.quantity]
+                "S": "S = sin 2psi sin Delta", "rho_re": "Re rho = tan psi cos Delta",
+                "rho_im": "Im rho = -tan psi sin Delta"}[self.quantity]
 
     @classmethod
     def parse(cls, text: str):
-        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C or S; default psi)."""
+        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C, S, rho_re or rho_im; default
+        psi; case-insensitive)."""
         if not text.startswith("ellipsometry"):
             return None
         parts = text.split(":")
         if not 2 <= len(parts) <= 3:
             raise ValueError(text)
         q = parts[2] if len(parts) > 2 else "psi"
-        q = q if q in ("psi", "delta") else q.upper()
+        q = q.lower()
+        q = q if q in ("psi", "delta", "rho_re", "rho_im") else q.upper()
         return cls(float(parts[1]), q)

@@ -75,8 +75,9 @@ class Geometry(eqx.Module):
     * :attr:`label` and :meth:`parse` — its command-line spelling, both ways;
     * :attr:`quantity_label` — what its reading is ("reflectance", "BRDF (1/sr)" …);
     * :attr:`signed` — True when a reading may be negative (ellipsometric Δ, C, S);
-    * optionally :meth:`background_factor` (for :func:`invert_background`) and
-      :meth:`prediction_columns` (the columns ``layerstack predict`` writes for it).
+    * optionally :meth:`background_factor` (for :func:`invert_background`),
+      :meth:`prediction_columns` (the columns ``layerstack predict`` writes for it) and
+      :meth:`residual` (model vs data in a fit: the difference, or a wrapped one for Δ).
 
     Geometries that do not go through :class:`~layerstack_jax.Optics` (an ellipsometer)
     override :meth:`measure` instead and return None from :meth:`optics`.
@@ -142,6 +143,14 @@ class Geometry(eqx.Module):
 
     #: the accepted spellings, for messages
     spelling: ClassVar[str] = ""
+
+    # -- how a reading is compared with a measured one
+    def residual(self, model, data):
+        """Model minus data, in the reading's unit, for the residuals of a fit
+        (``fitting.Objective``): ``model`` and ``data`` broadcast to ``(..., wl)``. The
+        difference ``model - data`` unless the reading lives on a circle (an ellipsometer's Δ,
+        wrapped into (−180°, 180°]); an override must stay differentiable in ``model``."""
+        return model - data
 
     def prediction_columns(self, text: str) -> list:
         """``[(column name, geometry)]`` that ``layerstack predict -g text`` writes."""

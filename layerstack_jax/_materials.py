@@ -141,6 +141,11 @@ class Tabulated(Material):
         check_finite(f"{self.name}.n", self.n)
         check_nonnegative(f"{self.name}.k", self.k)
 
+    @property
+    def data_range_nm(self) -> tuple:
+        """``(first, last)`` table wavelength in nm: the range the material can be evaluated on."""
+        return (float(self.wavelength_nm[0]), float(self.wavelength_nm[-1]))
+
     def __call__(self, wavelength_nm):
         table = np.asarray(self.wavelength_nm)
         if is_concrete(wavelength_nm):

@@ -8,7 +8,8 @@ computation shared with :func:`~fitting.fit_batch`. This module turns them into 
 * **convergence** — "converged" only when the solver met its tolerance (:data:`STATUS`);
 * **fit quality** — a separate verdict: χ²/ν with ν, a plain warning when it is implausible
   (≫ 1 or ≪ 1 with σ given; no σ given: χ² is not meaningful and σ is estimated from the
-  residuals), and data > 1 of a reflectance that suggest percent;
+  residuals), data > 1 of a reflectance that suggest percent, and ellipsometric data whose
+  Δ sign is the opposite of the model's (:func:`delta_sign_warnings`);
 * **σ used and its origin** — "given", "estimated from residuals" or "default 1 — χ² not
   meaningful";
 * **parameters on a bound** — named with value and bound;
@@ -33,6 +34,7 @@ from ._statistics import (CORRELATION_LIMIT, SIGMA_DEFAULT, SIGMA_GIVEN, bound_c
                           linearised_covariance, strong_correlations)
 
 __all__ = ["FitResult", "linearised_covariance", "build_result", "quality_verdict", "percent_warnings",
+           "delta_sign_warnings",
            "bounds_hit", "not_separated"]
 
 
@@ -107,6 +109,46 @@ def percent_warnings(objective: Objective, data: list) -> list:
             out.append(f"dataset {ds.label}: data reach {top:.4g} > 1 — a reflectance is a fraction; are these "
                        "percent? (divide by 100)")
     return out
+
+
+#: The Δ-sign warning is given when the sign-flipped data refit to a χ² at least this many times smaller.
+SIGN_FLIP_RATIO = 10.0
+
+
+def delta_sign_warnings(objective: Objective, options, args, chi2: float, dof: int) -> list:
+    """A plain warning when ellipsometric data probably carry the opposite Δ sign.
+
+    Checked only when the fit has data odd in Δ (``Ellipsometric`` quantities Δ, S, Im ρ:
+    ``geometry.odd_in_delta``) and, σ given, an implausibly large χ² (the tail test of
+    :func:`quality_verdict`). Then the same compiled fit (no new compilation) is run once more
+    from the parameters' starting values on the data with those readings negated — data written
+    in the other Δ convention (Δ = arg(r_p/r_s) instead of the instruments' −arg(r_p/r_s) that the
+    model reports). If that fit reaches a χ² at least :data:`SIGN_FLIP_RATIO` times smaller, the
+    warning says so. Cost: one extra solve, only for such fits. ``args``: the fit's
+    ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom."""
+    from scipy.stats import chi2 as chi2_distribution
+
+    odd = [ds.colour is None and bool(getattr(ds.geometry, "odd_in_delta", False)) for ds in objective.datasets]
+    if not any(odd) or not objective.sigma_given or dof <= 0 or not np.isfinite(chi2):
+        return []
+    if not (chi2 / dof > 1.5 and chi2_distribution.sf(chi2, dof) < IMPLAUSIBLE_P):
+        return []
+    import jax.numpy as jnp
+
+    from ._solve import compiled_fit, starting_point  # here: _solve imports this module
+
+    data, weight = args
+    mirrored = (tuple(-d if o else d for d, o in zip(data, odd)), weight)
+    start = jnp.asarray(starting_point(objective, options, objective.layout.x0))
+    out = compiled_fit(objective, options, batched=False)(start, mirrored, objective.optics)
+    flipped = float(sum(np.sum(np.asarray(r, float) ** 2) for r in out.residuals))
+    if not (np.isfinite(flipped) and flipped * SIGN_FLIP_RATIO <= chi2):
+        return []
+    which = ", ".join(ds.label for ds, o in zip(objective.datasets, odd) if o)
+    return [f"Δ sign: with the sign of the Δ-odd data ({which}) flipped, the same fit reaches χ² = {flipped:.4g} "
+            f"instead of {chi2:.4g} — the data most likely use the opposite Δ convention (Δ = arg(rp/rs), as in "
+            "exp(-iωt) codes) to the instruments' Δ = -arg(rp/rs) that the model computes: negate Δ, S and Im ρ "
+            "in the data (or check the file's convention)"]
 
 
 def bounds_hit(layout, x) -> list:
@@ -474,13 +516,16 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     spectra = {p.name: p.spectrum(c) for p, c in zip(layout.params, layout.split(x)) if p.basis is not None}
     masks = _mask(objective)
     data = [np.asarray(d) for d in args[0]]
-    residuals = [np.where(m, mod - d, np.nan) for m, mod, d in zip(masks, model, data)]
+    # the geometry's own residual (Δ wrapped into (−180°, 180°]), as in the fit itself
+    residuals = [np.where(m, mod - d if ds.colour is not None else np.asarray(ds.geometry.residual(mod, d)), np.nan)
+                 for ds, m, mod, d in zip(objective.datasets, masks, model, data)]
     data = [np.where(m, d, np.nan) for m, d in zip(masks, data)]
     pen = np.asarray(out.penalty)
     cost = 0.5 * (chi2 + float(np.sum(pen ** 2)))
     s = math.sqrt(chi2 / dof) if dof > 0 and np.isfinite(chi2) else math.nan
     verdict, warnings = quality_verdict(red, dof, objective.sigma_given, s)
     warnings = warnings + percent_warnings(objective, data)
+    warnings = warnings + delta_sign_warnings(objective, options, args, chi2, dof)
     at_bound = bounds_hit(layout, x)
     separated = not_separated(list(layout.names), stats.correlation, non_ident)
     converged = code == CONVERGED

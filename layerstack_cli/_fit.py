@@ -47,6 +47,11 @@ def _add_fit_parser(sub) -> None:
     p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
     p.add_argument("--nodes", type=_positive_int, default=DEFAULT_NODES, metavar="N",
                    help=f"Gauss-Legendre nodes per angular segment for diffuse integrals (default {DEFAULT_NODES})")
+    p.add_argument("--residuals", choices=RESIDUAL_KINDS, default=None, metavar="KIND",
+                   help="for a psi/Delta instrument file: what is compared with the model: NCS (default; N = cos 2psi, "
+                        "C = sin 2psi cos Delta, S = sin 2psi sin Delta), psi-delta (degrees; Delta residuals wrapped into "
+                        "(-180, 180]) or rho (Re and Im of rho = rp/rs = tan psi e^{-i Delta}); the file's sigma(psi), "
+                        "sigma(Delta) are propagated to first order; --sigma is then in that kind's unit")
     p.add_argument("--report", choices=("summary", "all"), default="summary",
                    help="with several spectra: one summary table (default) or every fit's full report")
     p.set_defaults(func=_cmd_fit)
@@ -70,6 +75,38 @@ def _summary(results: list) -> list[str]:
         chi = f"chi2/nu {r.reduced_chi2:.3g}" if getattr(r, "sigma_given", False) else "chi2 n/a (no sigma)"
         lines.append(f"{name:>16}  {ok:13}  {chi}  " + "  ".join(params))
     return lines
+
+
+#: residual kinds of a ψ/Δ file (``--residuals``), each a tuple of ``Ellipsometric`` quantities
+RESIDUAL_KINDS = ("NCS", "psi-delta", "rho")
+_RESIDUAL_QUANTITIES = {"NCS": ("N", "C", "S"), "psi-delta": ("psi", "delta"), "rho": ("rho_re", "rho_im")}
+
+
+def _rho_parts(psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
+    r"""Re ρ = tan ψ cos Δ and Im ρ = −tan ψ sin Δ of :math:`\rho = r_p/r_s = \tan\psi\,e^{-i\Delta}`
+    (the library's convention, ``Measurement.rho()``; Δ as instruments report it), and their σ by
+    first-order propagation of σψ, σΔ (degrees; taken as uncorrelated):
+    σ_Re = hypot(sec²ψ cos Δ σψ, tan ψ sin Δ σΔ), σ_Im = hypot(sec²ψ sin Δ σψ, tan ψ cos Δ σΔ), ψ, Δ, σ in radians."""
+    psi, delta = np.deg2rad(psi_deg), np.deg2rad(delta_deg)
+    tan, sec2 = np.tan(psi), 1.0 / np.cos(psi) ** 2
+    values = (tan * np.cos(delta), -tan * np.sin(delta))
+    if sigma_psi_deg is None:
+        return values, (None, None)
+    sp, sd = np.deg2rad(sigma_psi_deg), np.deg2rad(sigma_delta_deg)
+    sigmas = (np.hypot(sec2 * np.cos(delta) * sp, tan * np.sin(delta) * sd),
+              np.hypot(sec2 * np.sin(delta) * sp, tan * np.cos(delta) * sd))
+    floor = 1e-6  # a point with a zero propagated σ (ψ = 0) keeps a finite weight
+    return values, tuple(np.maximum(s, floor) for s in sigmas)
+
+
+def _ellipsometric_data(kind, psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
+    """``(values, sigmas)`` of the ``--residuals`` kind, one array per quantity of
+    ``_RESIDUAL_QUANTITIES[kind]`` (σ None when the file gives none)."""
+    if kind == "NCS":
+        return _nsc(psi_deg, delta_deg, sigma_psi_deg, sigma_delta_deg)
+    if kind == "rho":
+        return _rho_parts(psi_deg, delta_deg, sigma_psi_deg, sigma_delta_deg)
+    return (psi_deg, delta_deg), (sigma_psi_deg, sigma_delta_deg)
 
 
 def _nsc(psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
@@ -97,16 +134,26 @@ def _measurement_datasets(m, args) -> tuple[list, str, str]:
     name = Path(args.data).name
     valid = m.valid()
     datasets = []
+    kind = getattr(args, "residuals", None)
+    if kind is not None and m.quantity != "psi_delta":
+        raise LayerstackError(f"{args.data}: --residuals chooses how psi/Delta are compared; this file holds "
+                              f"{m.quantity}")
     if m.quantity == "psi_delta":
+        kind = kind or "NCS"
+        quantities = _RESIDUAL_QUANTITIES[kind]
         sig = (None, None) if m.sigma is None else (m.sigma[:, 0], m.sigma[:, 1])
-        (N, C, S), sigmas = _nsc(m.psi_deg, m.delta_deg, *sig)
+        values, sigmas = _ellipsometric_data(kind, m.psi_deg, m.delta_deg, *sig)
         for i, angle in enumerate(np.asarray(m.angles_deg, float)):
-            for q, y, sq in (("N", N, sigmas[0]), ("C", C, sigmas[1]), ("S", S, sigmas[2])):
+            for q, y, sq in zip(quantities, values, sigmas):
                 sigma = args.sigma if args.sigma is not None else (None if sq is None else np.where(valid[i], sq[i], 1.0))
                 datasets.append(fitting.Dataset(Ellipsometric(angle, q), np.where(valid[i], y[i], 0.0), sigma=sigma,
                                                 mask=valid[i], name=f"{name} {q} {angle:g} deg"))
-        label = "ellipsometry:" + ",".join(f"{a:g}" for a in m.angles_deg) + ":N,C,S"
-        origin = "from the file (psi/Delta fitted as N, C, S: free of Delta's wrap and of its reporting range)"
+        label = "ellipsometry:" + ",".join(f"{a:g}" for a in m.angles_deg) + ":" + ",".join(quantities)
+        origin = {"NCS": "from the file (psi/Delta fitted as N, C, S: free of Delta's wrap and of its reporting range)",
+                  "psi-delta": "from the file (psi/Delta fitted as psi, Delta in degrees; Delta residuals wrapped "
+                               "into (-180, 180])",
+                  "rho": "from the file (psi/Delta fitted as Re, Im of rho = rp/rs = tan psi e^{-i Delta}: free of "
+                         "Delta's wrap)"}[kind]
     elif m.quantity in ("reflectance", "transmittance"):
         q = "R" if m.quantity == "reflectance" else "T"
         for i, angle in enumerate(np.asarray(m.angles_deg, float)):
@@ -188,6 +235,9 @@ def _cmd_fit(args) -> int:
     if spectra is None:
         return _cmd_fit_measurement(args, read_measurement(args.data), start)
     data_wl, columns = spectra
+    if args.residuals is not None:
+        raise LayerstackError(f"{args.data}: --residuals applies to psi/Delta instrument files; for CSV spectra name "
+                              "the quantity in the geometry (e.g. -g ellipsometry:70:rho_re)")
     geometry, geometry_origin = _resolve_geometry(args.geometry, [n for n in columns if n != args.background],
                                                   source=args.data, origin="from the data's column names",
                                                   silent="the column names do not say")

@@ -1,5 +1,7 @@
 """`layerstack fit MODEL.toml MEASUREMENT` on real instrument files (issue 15): geometry, angles
-and σ come from the file; ψ/Δ are fitted as N, C, S (free of Δ's wrap and reporting range).
+and σ come from the file; ψ/Δ are fitted as N, C, S by default (free of Δ's wrap and reporting
+range), or with ``--residuals psi-delta`` (Δ residuals wrapped) or ``--residuals rho`` (Re, Im of
+ρ = r_p/r_s), σ propagated from σψ, σΔ to first order.
 
 The files are real measurements shipped in examples/data (provenance and licences in its
 README): the same RC2 scan of "2nm SiO2 on Si" exported by CompleteEASE and converted to NeXus.
@@ -11,6 +13,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from layerstack_cli import main
@@ -37,3 +40,38 @@ def test_instrument_file_refuses_csv_only_options(tmp_path, capsys):
     data = DATA / "woollam_completeease_2nm_SiO2_on_Si.dat"
     assert main(["fit", str(MODEL), str(data), "-g", "45/0", "-o", str(tmp_path / "r.json")]) == 2
     assert "the file says how it was measured" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind, quantities", [("psi-delta", "psi,delta"), ("rho", "rho_re,rho_im")])
+def test_fit_measured_file_with_each_residual_kind(tmp_path, capsys, kind, quantities):
+    """--residuals psi-delta | rho (issue 15): the same file, the same documented 2 nm."""
+    out = tmp_path / "r.json"
+    code = main(["fit", str(MODEL), str(DATA / "woollam_completeease_2nm_SiO2_on_Si.dat"), "-w", "400:820:20",
+                 "--residuals", kind, "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert f"geometry: ellipsometry:50,60,70:{quantities}" in text and "sigma: from the file" in text
+    d = json.loads(out.read_text())["fits"][0]["parameters"]["thickness_nm[SiO2]"]["value"]
+    assert d == pytest.approx(2.0, abs=0.1), d
+
+
+def test_residuals_option_needs_a_psi_delta_file(tmp_path, capsys):
+    csv = tmp_path / "r.csv"
+    csv.write_text("wavelength_nm,a\n400,0.1\n500,0.2\n")
+    assert main(["fit", str(MODEL), str(csv), "-g", "specular:8", "--residuals", "rho", "-o", str(tmp_path / "r.json")]) == 2
+    assert "--residuals applies to psi/Delta instrument files" in capsys.readouterr().err
+
+
+def test_rho_sigma_is_the_first_order_propagation():
+    """σ of Re ρ, Im ρ from σψ, σΔ: against central finite differences of tan ψ e^{−iΔ}."""
+    from layerstack_cli._fit import _rho_parts
+
+    psi, delta, sp, sd = np.array([12.0, 40.0]), np.array([-170.0, 95.0]), np.array([0.05, 0.02]), np.array([0.1, 0.3])
+    (re, im), (s_re, s_im) = _rho_parts(psi, delta, sp, sd)
+    rho = lambda p, d: np.tan(np.deg2rad(p)) * np.exp(-1j * np.deg2rad(d))  # noqa: E731
+    np.testing.assert_allclose(re + 1j * im, rho(psi, delta), rtol=1e-14)
+    h = 1e-6
+    dp = (rho(psi + h, delta) - rho(psi - h, delta)) / (2 * h) * sp
+    dd = (rho(psi, delta + h) - rho(psi, delta - h)) / (2 * h) * sd
+    np.testing.assert_allclose(s_re, np.hypot(dp.real, dd.real), rtol=1e-6)
+    np.testing.assert_allclose(s_im, np.hypot(dp.imag, dd.imag), rtol=1e-6)

@@ -123,6 +123,16 @@ def test_second_run_resumes(fit_command, capsys):
     assert main(argv + ["--no-quicklook"]) == 0
     out = capsys.readouterr().out
     assert "resuming: 4 of 4 chunks already written" in out  # 6 x 5 pixels in 3 x 3 regions
+    # a run killed before region (1, 1) (rows 3-5, columns 3-4: 6 pixels) was written: it is fitted again
+    import xarray as xr
+
+    before = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
+    (d / "maps.zarr.regions" / "1_1").unlink()  # the completion marker fit_cube documents
+    assert main(argv + ["--no-quicklook"]) == 0
+    assert "resuming: 3 of 4 chunks already written (24 of 30 pixels)" in capsys.readouterr().out
+    after = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
+    for name in before.data_vars:
+        np.testing.assert_array_equal(after[name].values, before[name].values, err_msg=name)
 
 
 def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):

@@ -244,3 +244,39 @@ def test_mask_formats_and_envi_geometry_metadata(tmp_path):
     envi.save_image(str(tmp_path / "c.hdr"), CUBE[..., :3].astype(np.float32),
                     metadata={"wavelength": [400, 410, 420], "wavelength units": "nm", "geometry": "45/0"})
     assert _stated_geometry(open_cube(tmp_path / "c.hdr"), str(tmp_path / "c.hdr")) == ["45/0"]
+
+
+@pytest.mark.slow  # timing-dependent: a child process killed mid-run (as tests/test_cube.py's own kill test)
+def test_killed_command_restarted_resumes(cube_files, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import xarray as xr
+
+    d = cube_files
+    out = tmp_path / "maps.zarr"
+    argv = [sys.executable, "-m", "layerstack_cli", "fit-cube", str(d / "model.toml"), str(d / "cube.zarr"), "-o",
+            str(out), "--chunk", "1", "--batch", "1", "--sigma", "1e-3", "--quiet", "--no-quicklook"]
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    child = subprocess.Popen(argv, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    markers = tmp_path / "maps.zarr.regions"
+    deadline = time.time() + 400
+    while time.time() < deadline and child.poll() is None:
+        if markers.exists() and len(list(markers.glob("*_*"))) >= 3:
+            break
+        time.sleep(0.02)
+    assert child.poll() is None, child.communicate()[1][-2000:]
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+    done = len([p for p in markers.glob("*_*") if not p.name.endswith(".tmp")])
+    assert 3 <= done < NY * NX  # 30 regions of one pixel: killed mid-way
+    again = subprocess.run(argv, cwd=root, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert f"resuming: {done} of {NY * NX} chunks already written" in again.stdout
+    maps = xr.open_zarr(out, consolidated=False).load()
+    ok = maps["status"].values == 0
+    assert ok.sum() == NY * NX - 1  # every pixel but the NaN one (no mask here)
+    np.testing.assert_allclose(maps["thickness_nm_film"].values[ok], D_TRUE[ok], atol=0.05)

@@ -24,6 +24,9 @@ from ._common import PROG, _positive_int, _precision, _resolve_geometry
 _UNITS = {"thickness": "nm", "alpha": "1/nm", "rho_g": "dimensionless", "n": "dimensionless",
           "coefficient": "dimensionless"}
 
+#: fit_cube's keywords named in its messages -> the options of this command.
+_OPTIONS = {"resume=False": "--restart", "allow_degenerate=True": "--allow-degenerate"}
+
 _MASK_FORMATS = ".npy (2-D array), .zarr (a store holding one 2-D variable) or an ENVI .hdr of one band"
 
 
@@ -349,6 +352,11 @@ def _cmd_fit_cube(args) -> int:
                                     client=args.scheduler, n_workers=args.workers, resume=not args.restart,
                                     progress=not args.quiet, allow_degenerate=args.allow_degenerate,
                                     max_steps=args.max_steps)
+        except LayerstackError as e:  # fit_cube's hints name its keywords: say the command's options
+            msg = str(e)
+            for keyword, option in _OPTIONS.items():
+                msg = msg.replace(keyword, option)
+            raise LayerstackError(msg) from None
         finally:
             logger.removeHandler(handler)
             logger.setLevel(level)

@@ -133,6 +133,10 @@ def test_second_run_resumes(fit_command, capsys):
     after = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
     for name in before.data_vars:
         np.testing.assert_array_equal(after[name].values, before[name].values, err_msg=name)
+    # the same store with other settings is another job: refused (exit 2), the option to overwrite named
+    assert main(argv[:-3] + ["--sigma", "2e-3", "--quiet", "--no-quicklook"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "another job" in err and "--restart" in err
 
 
 def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):

@@ -47,6 +47,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from layerstack_jax import LayerstackError
 from layerstack_jax._progress import reporter
+from layerstack_jax._validate import traced_checks_off
 
 from ._bounded import compiled_lbfgsb
 from ._objective import Objective
@@ -334,8 +335,9 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
         stats = _statistics_function(objective)
 
         def run(start, args, optics):
-            x, steps, status = solve(start, args, optics)
-            return FitOutput(x, steps, status, *stats(x, args, optics))
+            with traced_checks_off():  # trial points are the solver's business (traced_checks_off)
+                x, steps, status = solve(start, args, optics)
+                return FitOutput(x, steps, status, *stats(x, args, optics))
 
         if batched:
             devices = jax.devices()
@@ -373,11 +375,16 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     lower, upper = layout.lower / layout.scale, layout.upper / layout.scale
 
     def residuals(z, args, optics):
-        return objective.residuals(z * scale, args, optics)
+        with traced_checks_off():
+            return objective.residuals(z * scale, args, optics)
+
+    def statistics(x, args, optics):
+        with traced_checks_off():
+            return _statistics_function(objective)(x, args, optics)
 
     res_fn = jax.jit(residuals)
     jac_fn = jax.jit(jax.jacfwd(residuals))
-    stats = jax.jit(_statistics_function(objective))
+    stats = jax.jit(statistics)
 
     def one(z0, args, optics):
         z0 = np.clip(np.asarray(z0, dtype=float), lower, upper)

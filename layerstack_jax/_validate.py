@@ -15,6 +15,8 @@ mistake (µm given for nm, percent for a fraction).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import warnings
 from typing import Callable, Optional
 
@@ -88,12 +90,32 @@ class PendingChecks:
         return key, eqx.branched_error_if(x, jnp.any(preds), jnp.argmax(preds), tuple(self.messages))
 
 
+_TRACED_CHECKS = contextvars.ContextVar("layerstack_traced_checks", default=True)
+
+
+@contextlib.contextmanager
+def traced_checks_off():
+    """While tracing inside this block, traced values are not checked at run time (concrete
+    values still are). For callers that keep their traced values valid themselves and must see
+    a trial point outside the domain as a non-finite number rather than an error: the fitting
+    solvers keep parameters within their bounds by a transform, but a line search may still try
+    a point where that transform overflows (α = inf); the solver rejects such a step by its
+    non-finite cost, where an error would end the whole fit. The fixed parts of a fitted model
+    were checked eagerly when the objective was built."""
+    token = _TRACED_CHECKS.set(False)
+    try:
+        yield
+    finally:
+        _TRACED_CHECKS.reset(token)
+
+
 def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingChecks] = None, key=None):
     """``x``, checked: ``bad(a, xp)`` (``xp`` = numpy or jax.numpy) marks the invalid entries.
 
     Concrete ``x``: raises ``LayerstackError("<name> <what>, got <values>")`` if any entry is
     bad. Traced ``x``: returns ``equinox.error_if(x, any(bad), "<name> <what>")``, or, with
-    ``pending``, records the check there (under ``key``) and returns ``x`` unchanged. None passes.
+    ``pending``, records the check there (under ``key``) and returns ``x`` unchanged (inside
+    :func:`traced_checks_off`: ``x`` unchecked). None passes.
     """
     if x is None:
         return None
@@ -103,6 +125,8 @@ def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingCh
             raise LayerstackError(f"{name} {what}, got {_range_text(a)}")
         return x
     xj = jnp.asarray(x)
+    if not _TRACED_CHECKS.get():
+        return xj
     if pending is not None:
         pending.add(key, xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
         return xj

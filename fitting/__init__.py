@@ -37,6 +37,7 @@ from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
 from ._cube import CUBE_STATUS as CUBE_STATUS
+from ._cube import cube_regions as cube_regions
 from ._cube import fit_cube as fit_cube
 from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult
@@ -81,6 +82,7 @@ __all__ = [
     "calibration_series",
     "fit_batch",
     "fit_cube",
+    "cube_regions",
     "CUBE_STATUS",
     "Dataset",
     "Objective",

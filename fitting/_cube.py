@@ -110,7 +110,7 @@ def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
     layout = objective.layout
     x0 = jnp.asarray(layout.x0)
     args = objective.args()
-    J = jax.jacfwd(lambda x: objective.residuals(x, args, objective.optics))(x0)
+    J = jax.jit(jax.jacfwd(lambda x, a, o: objective.residuals(x, a, o)))(x0, args, objective.optics)  # one compile
     J = np.asarray(J) * layout.scale[None, :]
     return int(linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)[2])
 

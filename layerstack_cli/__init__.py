@@ -1,16 +1,18 @@
 """Command line: ``layerstack predict STACK.toml --geometry 45/0 -o out.csv [--plot out.png]``,
-``layerstack fit STACK.toml DATA.csv -g 45/0 -o result.json [--plot fit.png]`` and
+``layerstack fit STACK.toml DATA.csv -g 45/0 -o result.json [--plot fit.png]``,
+``layerstack fit-cube MODEL.toml CUBE -o maps.zarr`` and
 ``layerstack design DESIGN.toml -o design.toml [--plot design.png]``.
 
 Runnable as ``layerstack`` (console script) or ``python -m layerstack_cli``. This package sits
 above both :mod:`layerstack_jax` (physics) and :mod:`fitting` (inverse problems, design); neither
-imports it. One module per command (:mod:`._predict`, :mod:`._fit`, :mod:`._design`); shared
+imports it. One module per command (:mod:`._predict`, :mod:`._fit`, :mod:`._cube`, :mod:`._design`); shared
 helpers in :mod:`._common`. The stack file
 format is described in :mod:`layerstack_jax.io`.
 
 Unlike the library, the command line enables float64 (``jax_enable_x64``) unless ``--float32``
 is given, and restores the previous setting when it returns (so ``main`` can be called
-in-process). ``fit`` exits with status 1 when a fit did not converge (the report says why);
+in-process). ``fit`` and ``fit-cube`` exit with status 1 when a fit (a fitted pixel) did not
+converge (the report says why);
 ``design`` exits with status 1 when the design misses a target (or the required yield) — it
 still writes the best design found, and the report says which target failed; a design that
 meets every target exits 0 even if the optimizer hit its step limit. Input problems (bad stack

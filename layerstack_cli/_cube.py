@@ -173,7 +173,7 @@ def _read_mask(path: str, shape: tuple) -> np.ndarray:
 def _regions_written(out: Path, shape: tuple, chunk: int) -> tuple[int, int, int]:
     """``(regions written, regions, pixels written)`` of a store from an earlier run: its completion
     markers ``<out>.regions/<iy>_<ix>`` (the layout :func:`fitting.fit_cube` documents)."""
-    from fitting._cube import cube_regions  # in the module's __all__, not re-exported by fitting
+    from fitting import cube_regions
 
     regions = cube_regions(shape, (chunk, chunk))
     markers = Path(str(out).rstrip("/") + ".regions")

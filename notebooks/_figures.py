@@ -1,7 +1,7 @@
 """Where the notebooks save their figures: ``notebooks/figures/`` (the rendered notebooks link to
 it), or the folder named by ``NOTEBOOK_FIGURES`` (the tests write there, leaving the committed
 PNGs alone). Imported by every ``notebooks/NN_*.py``; the notebooks run with this folder as
-their script directory (``python notebooks/NN_*.py``, Jupyter via jupytext, ``render.py``)."""
+their script directory (``python notebooks/NN_*.py``, Jupyter via jupytext, ``execute.py``)."""
 
 from __future__ import annotations
 

@@ -22,6 +22,9 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.py"))
 # is tested in the default run (tests/test_render_mitsuba.py, tests/test_render_lookup.py)
 SLOW = {"07_rendering_coated_objects"}
 TIMEOUT_S = 900  # per notebook, all cells together
+# 07 builds 19 coating tables, renders Figs. 8 (3 x 3) and 9 and compares both k_d forms: 1045 s
+# measured on this 2-core machine under load 10-12
+TIMEOUT_S_SLOW = 2400
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +50,8 @@ def test_notebook_runs(script, tmp_path, runner):
     from nbclient.exceptions import CellExecutionError, CellTimeoutError
 
     try:
-        notebook, saved = runner.execute(script, timeout=TIMEOUT_S, figures=tmp_path)
+        notebook, saved = runner.execute(script, timeout=TIMEOUT_S_SLOW if script.stem in SLOW else TIMEOUT_S,
+                                         figures=tmp_path)
     except (CellExecutionError, CellTimeoutError) as e:
         pytest.fail(f"{script.name} failed as a notebook:\n{str(e)[-6000:]}")
     assert sorted(p.name for p in tmp_path.glob("*.png")), f"{script.name} saved no figure"

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, ellipsometry, reflectance
-from layerstack_jax.io import load_stack, parse_wavelengths, save_spectra_csv
+from layerstack_jax.io import load_stack, parse_values, parse_wavelengths, save_spectra_csv
 
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _precision
 
@@ -67,22 +67,7 @@ def _vary_grid(spec: str) -> tuple[str, np.ndarray]:
     if not sep or not name or not grid.strip():
         raise LayerstackError(f"--vary {spec!r}: write LAYER.FIELD=START:STOP:STEP (e.g. "
                               "varnish.thickness_nm=1e4:5e4:1000) or LAYER.FIELD=v1,v2,...")
-    text = grid.strip()
-    try:
-        if ":" in text:
-            parts = text.split(":")
-            if len(parts) != 3:
-                raise ValueError
-            a, b, step = (float(x) for x in parts)
-            if not all(np.isfinite((a, b, step))) or step <= 0 or b < a:
-                raise LayerstackError(f"--vary {spec!r}: need finite START <= STOP and STEP > 0")
-            values = a + step * np.arange(int(np.floor((b - a) / step + 1e-9)) + 1)
-        else:
-            values = np.asarray([float(x) for x in text.split(",")], dtype=float)
-    except ValueError:
-        raise LayerstackError(f"--vary {spec!r}: the values must be START:STOP:STEP or a comma list of numbers") from None
-    if not np.all(np.isfinite(values)):
-        raise LayerstackError(f"--vary {spec!r}: values must be finite")
+    values = parse_values(grid, f"--vary {name}", "1e4:5e4:1000")
     return name, values
 
 

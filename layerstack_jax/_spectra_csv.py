@@ -15,7 +15,7 @@ import numpy as np
 
 from ._validate import LayerstackError
 
-__all__ = ["read_csv_columns", "read_spectra_csv", "save_spectra_csv", "parse_wavelengths"]
+__all__ = ["read_csv_columns", "read_spectra_csv", "save_spectra_csv", "parse_values", "parse_wavelengths"]
 
 
 def _fields(line: str) -> list[str]:
@@ -165,15 +165,14 @@ def save_spectra_csv(path, wavelength_nm, columns: Mapping[str, object], *, fmt:
     return path
 
 
-def parse_wavelengths(text) -> np.ndarray:
-    """Wavelength grid in nm from ``"start:stop:step"`` (stop included when it falls on the
-    grid), a single value ``"550"`` or a comma list ``"450,550,650"`` (strictly increasing).
-    Returns a 1-D float array of shape ``(wl,)`` in nm.
-    """
+def parse_values(text, what: str = "values", example: str = "380:780:5") -> np.ndarray:
+    """Numbers from ``"start:stop:step"`` (stop included when it falls on the grid; step > 0,
+    stop >= start), a single value ``"550"`` or a comma list ``"450,550,650"``: a 1-D float
+    array, all finite. ``what`` names the quantity in the error (e.g. ``"wavelengths"``,
+    ``"--vary varnish.thickness_nm"``), ``example`` shows a valid range."""
     t = str(text).strip()
     bad = LayerstackError(
-        f"bad wavelengths {text!r}: use start:stop:step in nm (e.g. 380:780:5), one value (550) "
-        "or a comma list (450,550,650)"
+        f"bad {what} {text!r}: use start:stop:step (e.g. {example}), one value or a comma list of numbers"
     )
     try:
         if ":" in t:
@@ -184,17 +183,28 @@ def parse_wavelengths(text) -> np.ndarray:
             if not all(map(math.isfinite, (start, stop, step))):
                 raise bad
             if step <= 0:
-                raise LayerstackError(f"bad wavelengths {text!r}: step must be > 0")
+                raise LayerstackError(f"bad {what} {text!r}: step must be > 0")
             if stop < start:
-                raise LayerstackError(f"bad wavelengths {text!r}: stop must be >= start")
+                raise LayerstackError(f"bad {what} {text!r}: stop must be >= start")
             count = int(math.floor((stop - start) / step + 1e-9)) + 1
-            wl = start + step * np.arange(count)
+            values = start + step * np.arange(count)
         else:
-            wl = np.asarray([float(p) for p in t.split(",")], dtype=float)
+            values = np.asarray([float(p) for p in t.split(",")], dtype=float)
+    except LayerstackError:  # a ValueError too: the specific message stands
+        raise
     except ValueError:
         raise bad from None
-    if wl.size == 0 or not np.all(np.isfinite(wl)):
+    if values.size == 0 or not np.all(np.isfinite(values)):
         raise bad
+    return values
+
+
+def parse_wavelengths(text) -> np.ndarray:
+    """Wavelength grid in nm from ``"start:stop:step"`` (stop included when it falls on the
+    grid), a single value ``"550"`` or a comma list ``"450,550,650"`` (strictly increasing).
+    Returns a 1-D float array of shape ``(wl,)`` in nm.
+    """
+    wl = parse_values(text, "wavelengths", "380:780:5 in nm")
     if np.any(wl <= 0):
         raise LayerstackError(f"bad wavelengths {text!r}: wavelengths must be > 0 nm")
     if np.any(np.diff(wl) <= 0):

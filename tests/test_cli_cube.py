@@ -216,6 +216,8 @@ def test_predict_vary_table_one_geometry(tmp_path):
     ("paint.thickness_nm=1:2:1", "no layer named 'paint'"),
     ("background.rho_g=0:1:0.5", "has a [substrate], not a [background]"),
     ("varnish.thickness_nm=-5:5:5", "must be >= 0"),
+    ("varnish.thickness_nm=5e4:1e4:1e3", "stop must be >= start"),
+    ("varnish.thickness_nm=1e4:x:1e3", "use start:stop:step"),
 ])
 def test_predict_vary_errors_name_the_field(tmp_path, capsys, vary, message):
     (tmp_path / "s.toml").write_text(VARNISH)

@@ -172,12 +172,17 @@ class LookupTable:
     objective's start, then draws uniform between finite bounds and log-uniform within a factor
     10 of the start where one side is open); their spectra are computed once, by one compiled
     ``lax.map``, and do not depend on the data. :meth:`nearest` gives, for each fit, the point
-    with the smallest weighted squared distance :math:`\sum w^2 (m - y)^2` to its data — three
-    matrix products per dataset, no loop over fits."""
+    with the smallest weighted squared residual :math:`\sum w^2 r(m, y)^2` to its data, ``r`` the
+    objective's own residual (:meth:`~fitting.Objective.residual_of`: Δ wrapped for an
+    ellipsometer) — for all the fits of a chunk at once, a block of table points at a time."""
+
+    #: Table points compared with all the fits of a chunk at once (memory: fits × BLOCK × points).
+    BLOCK = 32
 
     def __init__(self, objective: Objective, size: int = 256, seed: int = 0):
         if not (isinstance(size, int) and size >= 1):
             raise LayerstackError(f"lookup size must be an integer >= 1, got {size!r}")
+        self._objective = objective
         self.points = multistart_points(objective, size, seed)  # (G, P) physical
         model = jax.jit(lambda X: jax.lax.map(lambda x: objective.predict(x, objective.optics), X, batch_size=16))
         self.spectra = tuple(np.asarray(m).reshape(size, -1) for m in model(jnp.asarray(self.points)))
@@ -196,11 +201,14 @@ class LookupTable:
         """``(N, P)`` physical starting points for data ``ys`` with weights ``ws`` (one
         ``(N, samples, wl)`` array per dataset each)."""
         n = np.asarray(ys[0]).shape[0]
-        d = np.zeros((n, self.points.shape[0]))
-        for y, w, m in zip(ys, ws, self.spectra):
-            y = np.asarray(y, float).reshape(n, -1)
-            w2 = np.asarray(w, float).reshape(n, -1) ** 2
-            d += np.sum(w2 * y * y, axis=1)[:, None] - 2.0 * (w2 * y) @ m.T + w2 @ (m * m).T
+        g = self.points.shape[0]
+        d = np.zeros((n, g))
+        for i, (y, w, m) in enumerate(zip(ys, ws, self.spectra)):
+            y = jnp.asarray(y).reshape(n, 1, -1)
+            w = jnp.asarray(w).reshape(n, 1, -1)
+            for a in range(0, g, self.BLOCK):  # (N, block, points) at a time: bounded memory
+                r = w * self._objective.residual_of(i, jnp.asarray(m[None, a:a + self.BLOCK]), y)
+                d[:, a:a + self.BLOCK] += np.asarray(jnp.sum(r * r, axis=-1))
         return self.points[np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)]
 
 

@@ -522,8 +522,15 @@ class Objective:
         ``model``: :meth:`predict` of ``x`` when the caller already has it."""
         data, weight = args
         model = self.predict(x, optics) if model is None else model
-        return tuple(w * (f - y if ds.colour is not None else ds.geometry.residual(f, y))
-                     for ds, f, y, w in zip(self.datasets, model, data, weight))
+        return tuple(w * self.residual_of(i, f, y) for i, (f, y, w) in enumerate(zip(model, data, weight)))
+
+    def residual_of(self, i: int, model, data):
+        """Unweighted residual of dataset ``i``: the geometry's
+        :meth:`~layerstack_jax.Geometry.residual` of ``model`` and ``data`` (``model − data``; Δ
+        wrapped for an ellipsometer), or the plain difference for a colour dataset; any shapes
+        that broadcast."""
+        ds = self.datasets[i]
+        return model - data if ds.colour is not None else ds.geometry.residual(model, data)
 
     def residuals(self, x, args, optics=None):
         """Flat residual vector: weighted data residuals, then smoothness penalties."""

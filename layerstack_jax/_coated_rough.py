@@ -74,13 +74,13 @@ import numpy as np
 from ._coherent import _lift_branch_point, _media, _packet_recursion
 from ._custom_types import Array, Complex, Float, RealLike
 from ._fresnel import exit_medium_ratio, fresnel_amplitudes, normal_wavevector, power_flux
-from ._he_torrance import SHADOWING_FORMS, auto_terms, check_roughness, directional_diffuse, specular_attenuation
+from ._he_torrance import (SHADOWING_FORMS, auto_terms, check_scattering_inputs, directional_diffuse,
+                           specular_attenuation)
 from ._illumination import snell_invariant
 from ._numerics import abs2, safe_divide, safe_divide_nonzero
 from ._response import natural
 from ._stack import ResolvedStack, Stack, Substrate, resolve
-from ._validate import (LayerstackError, LayerstackWarning, check_angle_deg, check_finite, check_unit_interval,
-                        is_concrete)
+from ._validate import LayerstackError, LayerstackWarning, is_concrete
 
 __all__ = ["CoatedRough", "coated_rough", "FORMS", "PREFACTORS", "check_coated_stack", "rough_specular",
            "rough_diffuse"]
@@ -276,11 +276,7 @@ def coated_rough(
     """
     check_coated_stack(stack)
     check_options(form, prefactor, shadowing_form)
-    check_angle_deg("incidence_deg", incidence_deg, grazing=True)
-    check_angle_deg("viewing_deg", viewing_deg, grazing=True)
-    check_finite("azimuth_deg", azimuth_deg)
-    check_roughness(sigma_nm, tau_nm)
-    check_unit_interval("uniform_albedo", uniform_albedo)
+    check_scattering_inputs(incidence_deg, viewing_deg, azimuth_deg, sigma_nm, tau_nm, uniform_albedo)
     wl = jnp.asarray(wavelength_nm)
     n_next = resolve(stack, wl).n[-2]
     warn_absorbing_neighbour(stack, n_next)

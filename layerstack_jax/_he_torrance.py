@@ -317,6 +317,17 @@ def check_roughness(sigma_nm, tau_nm) -> None:
                       LayerstackWarning, stacklevel=3)
 
 
+def check_scattering_inputs(incidence_deg, viewing_deg, azimuth_deg, sigma_nm, tau_nm, uniform_albedo) -> None:
+    """The inputs every He–Torrance BRDF takes (:func:`he_torrance_brdf`,
+    :func:`layerstack_jax.coated_rough`): polar angles in [0, 90] degrees, a finite azimuth
+    (degrees), σ0 ≥ 0 and τ > 0 (nm, :func:`check_roughness`), an albedo in [0, 1]."""
+    check_angle_deg("incidence_deg", incidence_deg, grazing=True)
+    check_angle_deg("viewing_deg", viewing_deg, grazing=True)
+    check_finite("azimuth_deg", azimuth_deg)
+    check_roughness(sigma_nm, tau_nm)
+    check_unit_interval("uniform_albedo", uniform_albedo)
+
+
 def auto_terms(sigma_nm, wavelength_nm, n_a, n_terms) -> int:
     """``n_terms`` when given, else :func:`series_terms` for the largest g the inputs allow
     (:math:`(4\\pi n_a\\sigma_0/\\lambda_{min})^2`) when they are concrete, else 64 (g ≲ 25)."""
@@ -372,11 +383,7 @@ def he_torrance_brdf(
     check_finite("wavelength_nm", wl)
     if is_concrete(wl) and np.any(np.asarray(wl) <= 0):
         raise LayerstackError("wavelength_nm must be > 0")
-    check_angle_deg("incidence_deg", incidence_deg, grazing=True)
-    check_angle_deg("viewing_deg", viewing_deg, grazing=True)
-    check_finite("azimuth_deg", azimuth_deg)
-    check_roughness(sigma_nm, tau_nm)
-    check_unit_interval("uniform_albedo", uniform_albedo)
+    check_scattering_inputs(incidence_deg, viewing_deg, azimuth_deg, sigma_nm, tau_nm, uniform_albedo)
     if shadowing_form not in SHADOWING_FORMS:
         raise LayerstackError(f"shadowing_form must be one of {SHADOWING_FORMS}, got {shadowing_form!r}")
     n_b = as_material(n_substrate)(wl)

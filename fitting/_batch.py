@@ -32,7 +32,7 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import (HOST_METHODS, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
+from ._solve import (BY_LBFGSB, HOST_METHODS, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
                      settle_on_bounds, starting_point)
 from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
 from ._status import CONVERGED, INVALID_DATA, result_message
@@ -56,8 +56,9 @@ class BatchResult:
             sigma_origin: ``"given"``, ``"estimated from residuals"`` or ``"default 1 — χ² not
             meaningful"``;
         at_bound: ``(N, P)`` components on a bound; finished_on_bound: ``(N,)`` fits of an
-            unconstrained method settled on an optimal bound, finished_with_lbfgsb: ``(N,)`` fits
-            it ended on a bound that is not optimal, finished by L-BFGS-B
+            unconstrained method settled on an optimal bound; restarted: ``(N,)`` fits it ended
+            on a bound that is not optimal, restarted from there; finished_with_lbfgsb: ``(N,)``
+            fits that ended on such a bound again, finished by L-BFGS-B
             (:func:`fitting._solve.settle_on_bounds`);
         invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
         wall_time_s: wall-clock time of the batch, seconds.
@@ -89,6 +90,7 @@ class BatchResult:
     unresolved: Optional[np.ndarray] = None
     at_bound: Optional[np.ndarray] = None
     finished_on_bound: Optional[np.ndarray] = None
+    restarted: Optional[np.ndarray] = None
     finished_with_lbfgsb: Optional[np.ndarray] = None
     invalid_data: dict = dataclasses.field(default_factory=dict)
 
@@ -113,6 +115,9 @@ class BatchResult:
         if self.finished_on_bound is not None and self.finished_on_bound.any():
             lines.append(f"  {int(self.finished_on_bound.sum())} fit(s) converged on a bound ({self.method} held the "
                          "parameter there; the bound is optimal)")
+        if self.restarted is not None and self.restarted.any():
+            lines.append(f"  {int(self.restarted.sum())} fit(s) restarted ({self.method} reached a bound on the way "
+                         "that is not optimal there)")
         if self.finished_with_lbfgsb is not None and self.finished_with_lbfgsb.any():
             lines.append(f"  {int(self.finished_with_lbfgsb.sum())} fit(s) finished with L-BFGS-B ({self.method} reached "
                          "a bound that is not optimal there)")
@@ -299,7 +304,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             names = [nm for nm, b in zip(layout.names, lo[k] | hi[k]) if b]
             full[i] = build_result(objective, o, row, jax.tree.map(lambda a: a[k], args),
                                    scale_covariance=scale_covariance, rank_rtol=rank_rtol,
-                                   note=bound_note(method, names, bool(settled[k]), bool(finished[k])),
+                                   note=bound_note(method, names, bool(settled[k]), int(finished[k])),
                                    stats=_row(stats, k))
 
     def spread(a, fill):  # rows of the fits made -> all N rows
@@ -318,7 +323,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         stats.sigma_origin not in (SIGMA_GIVEN, SIGMA_DEFAULT), time.perf_counter() - start_time, full,
         dof=stats.dof, sigma_origin=stats.sigma_origin, unresolved=spread(stats.unresolved, False),
         at_bound=spread(lo | hi, False), finished_on_bound=spread(settled, False),
-        finished_with_lbfgsb=spread(finished, False), invalid_data=invalid,
+        restarted=spread(finished == RESTARTED, False), finished_with_lbfgsb=spread(finished == BY_LBFGSB, False),
+        invalid_data=invalid,
     )
 
 

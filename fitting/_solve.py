@@ -420,7 +420,13 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     return run_all
 
 
-def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, args) -> tuple[FitOutput, np.ndarray, np.ndarray]:
+#: How a fit was finished after its solver ended on a bound that is not optimal
+#: (:func:`settle_on_bounds`): not at all, by the same solver restarted from there, by L-BFGS-B.
+NOT_FINISHED, RESTARTED, BY_LBFGSB = 0, 1, 2
+
+
+def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, args, *,
+                     restart: bool = True) -> tuple[FitOutput, np.ndarray, np.ndarray]:
     r"""Fits of an unconstrained method that ended with parameters on a bound, checked for
     optimality there (Karush–Kuhn–Tucker): the gradient of :math:`\tfrac12\|r\|^2` presses
     each such parameter against its bound, and — unless the solver met its own step test with
@@ -429,26 +435,30 @@ def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, arg
 
     * Where it holds the fit is converged on the bound, its parameters in contact exactly on it.
     * Where it does not and the solver ended converged or failed (the bound was reached on the
-      way, or a step failed there), the fit is finished from that point by L-BFGS-B
-      (:func:`fitting._bounded.compiled_lbfgsb`, bounds kept exactly): its output replaces the
-      row; its steps are added to the first solver's.
+      way — a first step that overshoots —, or a step failed there), the same solver is
+      restarted once from that point (a start on a bound is moved inside it,
+      :meth:`~fitting._parameters.Layout.to_unconstrained`) and its result checked the same
+      way; a fit that ends on a non-optimal bound again is finished by L-BFGS-B
+      (:func:`fitting._bounded.compiled_lbfgsb`, bounds kept exactly). The new output
+      replaces the row; the steps of all runs are added.
     * A fit stopped by ``max_steps`` away from an optimal bound stays as it is.
 
     ``out``: NumPy :class:`FitOutput` with a leading axis of fits; ``args``: the fits' data
     ``(spectra, weights)`` with the same leading axis. Returns the updated output, the ``(N,)``
-    mask of the fits settled on a bound and that of the fits finished by L-BFGS-B; other
-    methods and fits are unchanged."""
+    mask of the fits settled on a bound and the ``(N,)`` codes of how fits were finished
+    (:data:`NOT_FINISHED`, :data:`RESTARTED`, :data:`BY_LBFGSB`); other methods and fits are
+    unchanged."""
     x, status = np.asarray(out.x, float), np.asarray(out.status)
     n = x.shape[0]
-    none = np.zeros(n, bool)
+    settled, how = np.zeros(n, bool), np.full(n, NOT_FINISHED)
     if o.method not in _TRANSFORMED:
-        return out, none, none
+        return out, settled, how
     layout = objective.layout
     lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale)
     active = lo | hi
     candidate = (status != NONFINITE) & np.all(np.isfinite(x), axis=-1) & active.any(axis=-1)
     if not candidate.any():
-        return out, none, none
+        return out, settled, how
     J = np.asarray(out.jacobian, float)  # (N, M, P) w.r.t. z = x / scale
     r = np.concatenate([np.asarray(a, float).reshape(n, -1) for a in out.residuals]
                        + [np.asarray(out.penalty, float).reshape(n, -1)], axis=-1)
@@ -463,21 +473,34 @@ def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, arg
     x = np.where(settled[:, None] & lo, layout.lower, np.where(settled[:, None] & hi, layout.upper, x))
     out = out._replace(x=x, status=np.where(settled, CONVERGED, status))
     finish = candidate & ~settled & ((status == CONVERGED) | (status == FAILED))
-    if finish.any():
-        out = _finish_with_lbfgsb(objective, o, out, args, np.flatnonzero(finish))
-    return out, settled, finish
-
-
-def _finish_with_lbfgsb(objective: Objective, o: SolverOptions, out: FitOutput, args, rows) -> FitOutput:
-    """``out`` with its ``rows`` refitted by L-BFGS-B (same tolerances and step limit), each
-    started from its own solution; the steps of both solvers are added."""
-    layout = objective.layout
+    if not finish.any():
+        return out, settled, how
+    rows = np.flatnonzero(finish)
+    sub = jax.tree.map(lambda a: np.asarray(a)[rows], args)
+    if restart:
+        again = _refit(objective, o, out, rows, sub)
+        again, s2, h2 = settle_on_bounds(objective, o, again, sub, restart=False)
+        settled[rows] = s2
+        how[rows] = np.where(h2 == BY_LBFGSB, BY_LBFGSB, RESTARTED)
+        return _put(out, again, rows), settled, how
     bounded = SolverOptions("lbfgsb", o.rtol, o.atol, o.gtol, o.max_steps)
+    how[rows] = BY_LBFGSB
+    return _put(out, _refit(objective, bounded, out, rows, sub), rows), settled, how
+
+
+def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -> FitOutput:
+    """The fits ``rows`` of ``out`` solved again by ``o``'s method, each started from its own
+    solution (clipped into the bounds); NumPy output, one row per fit, with the steps of the
+    earlier run added."""
+    layout = objective.layout
     start = np.clip(np.asarray(out.x, float)[rows], layout.lower, layout.upper)
-    sub = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[rows]), args)
-    new = jax.tree.map(np.asarray, compiled_fit(objective, bounded, batched=True)(
-        jnp.asarray(starting_point(objective, bounded, start)), sub, objective.optics))
-    new = new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
+    new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(
+        jnp.asarray(starting_point(objective, o, start)), jax.tree.map(jnp.asarray, args), objective.optics))
+    return new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
+
+
+def _put(out: FitOutput, new: FitOutput, rows) -> FitOutput:
+    """``out`` with its ``rows`` replaced by ``new``."""
 
     def put(a, b):
         a = np.array(a, dtype=np.result_type(a, b))
@@ -536,12 +559,16 @@ def _multistart(objective: Objective, o: SolverOptions, y0, bargs, progress) -> 
     return jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
 
 
-def bound_note(method: str, names: list, settled: bool, finished: bool = False) -> str:
+def bound_note(method: str, names: list, settled: bool, finished: int = 0) -> str:
     """The result's note when a fit of ``method`` was settled on a bound, or finished by
-    L-BFGS-B (:func:`settle_on_bounds`)."""
-    if finished:
+    another run (:func:`settle_on_bounds`: ``finished`` is :data:`RESTARTED` or
+    :data:`BY_LBFGSB`)."""
+    if finished == BY_LBFGSB:
         return (f"{method} reached a bound that is not optimal there (the gradient pulls away from it, or a step "
-                "failed on it); the fit was finished from that point with L-BFGS-B (bounds kept exactly)")
+                "failed on it), twice; the fit was finished from that point with L-BFGS-B (bounds kept exactly)")
+    if finished == RESTARTED:
+        return (f"{method} reached a bound on the way that is not optimal there (the gradient pulls away from it); "
+                "it was restarted from that point" + (" and converged on a bound" if settled else ""))
     if not settled:
         return ""
     return (f"{method} held {', '.join(names)} on a bound (its transformed coordinates only approach a bound); the "
@@ -611,4 +638,4 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                         starts=starts, starts_converged=n_starts_converged,
-                        note=bound_note(method, names, bool(settled[best]), bool(finished[best])))
+                        note=bound_note(method, names, bool(settled[best]), int(finished[best])))

@@ -8,6 +8,7 @@ objects by name.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Mapping, NamedTuple, Optional
@@ -17,6 +18,7 @@ import numpy as np
 from ._file_grammar import (FileLocation, check_grid, check_range, is_number, named_tables, read_number,
                             read_number_list, read_toml, reject_unknown_keys)
 from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
+from ._oscillators import CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
 from ._spectra_csv import read_csv_columns
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
 from ._validate import LayerstackError, is_concrete
@@ -29,7 +31,12 @@ _LAYER_KEYS = ("name", "n", "k", "thickness_nm", "coherent", "alpha_per_nm")
 _SUBSTRATE_KEYS = ("n", "k")
 _BACKGROUND_KEYS = ("n", "rho_g")
 _AMBIENT_KEYS = ("n",)
-_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material")
+#: Dispersion models read by name, their coefficients by field name, each a number, a list
+#: (one per oscillator) or a free-parameter table: ``n = { tauc_lorentz = { Eg = 3.2, A = {
+#: value = 150, free = true, min = 10, max = 500 }, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }``.
+_MODELS = {"lorentz": Lorentz, "drude": Drude, "tauc_lorentz": TaucLorentz, "cody_lorentz": CodyLorentz,
+           "cauchy_urbach": CauchyUrbach}
+_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material") + tuple(_MODELS)
 
 
 def _read_table(where: FileLocation, key: str, base_dir: Path, filename, required, optional=()) -> tuple[Path, dict]:
@@ -49,8 +56,42 @@ def _read_table(where: FileLocation, key: str, base_dir: Path, filename, require
 
 
 # --------------------------------------------------------------------------- materials
-def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_k: bool, label: str) -> Material:
-    """The material of a table with an ``n`` key (and optionally ``k``)."""
+def _coefficient(where: FileLocation, model: str, field: str, spec, path: Optional[tuple], free: Optional[list]):
+    """One coefficient of a dispersion model: a number, a list of numbers (one per oscillator),
+    or a free-parameter table (recorded in ``free`` under ``path + (field,)``; scalars only)."""
+    key = f"{model}.{field}"
+    if isinstance(spec, dict):
+        if path is None:
+            raise where.error(f"{model}: {field}: free coefficients are declared in [[layers]] only", "n")
+        spec = _split_free(where, key, spec, path + (field,), "other", free, spectral=False)
+    if is_number(spec):
+        return float(spec)
+    return read_number_list(where, "n", spec, f"{model} {field}")
+
+
+def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple], free: Optional[list]) -> Material:
+    """``n = { <model> = { coefficient = ..., ... } }`` (:data:`_MODELS`)."""
+    cls = _MODELS[kind]
+    fields = [f for f in dataclasses.fields(cls) if f.init]
+    names = tuple(f.name for f in fields)
+    if not isinstance(value, dict):
+        raise where.error(f"{kind} must be an inline table of its coefficients {{ {', '.join(names)} }}", "n")
+    reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n': {kind}"), value, names)
+    missing = [f.name for f in fields if f.default is dataclasses.MISSING and f.name not in value]
+    if missing:
+        raise where.error(f"{kind} needs {', '.join(missing)} (coefficients: {', '.join(names)})", "n")
+    coefficients = {name: _coefficient(where, kind, name, value[name], path, free) for name in names if name in value}
+    try:
+        return cls(**coefficients)
+    except LayerstackError as e:
+        raise where.error(f"{kind}: {e}", "n") from None
+
+
+def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_k: bool, label: str,
+                  path: Optional[tuple] = None, free: Optional[list] = None) -> Material:
+    """The material of a table with an ``n`` key (and optionally ``k``). ``path``: where the
+    material sits in the stack (``("layers", name, "index")``) when its coefficients may be
+    declared free; their declarations are appended to ``free``."""
     if "n" not in table:
         raise where.error("missing (refractive index: a number or a dispersion table)", "n")
     spec = table["n"]
@@ -87,7 +128,13 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
     value = spec[kind]
     if kind == "material":
         return _database_material(where, spec, k_given, allow_k)
+    if kind in _MODELS:
+        if k_given:
+            raise where.error(f"not allowed with n = {{ {kind} = ... }}: the model gives k itself", "k")
+        return _model_material(where, kind, value, path, free)
     if kind == "cauchy":
+        if isinstance(value, list) and any(isinstance(v, dict) for v in value):  # free coefficients
+            value = [_coefficient(where, "cauchy", c, v, path, free) for c, v in zip("ABC", value)]
         coef = read_number_list(where, "n", value, "cauchy coefficients [A, B, C]")
         if coef.size > 3:
             raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {coef.size}", "n")
@@ -282,7 +329,8 @@ def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index
     coherent = table["coherent"]
     if not isinstance(coherent, bool):
         raise where.error(f"must be true or false, got {coherent!r}", "coherent")
-    index = read_material(where, table, base_dir, allow_k=True, label=f"layer {name!r} n")
+    index = read_material(where, table, base_dir, allow_k=True, label=f"layer {name!r} n",
+                          path=("layers", name, "index"), free=free)
     alpha = None
     if "alpha_per_nm" in table:
         if coherent:

@@ -60,7 +60,17 @@ Dispersion: wherever ``n`` is accepted it may also be an inline table with exact
   is the database's material id (or a ``"shelf/book/page"`` path), ``source`` the page id or
   words of its title (``"Johnson and Christy"``), needed when the material has several pages;
   optional ``shelf``. n and k both come from the database (no ``k`` key); wavelengths outside
-  the data's range are an error.
+  the data's range are an error;
+* ``n = { tauc_lorentz = { Eg = 3.2, A = 150, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }`` — a dispersion
+  model by name with its coefficients as the class's fields (units there, eV for energies):
+  ``lorentz`` (:class:`~layerstack_jax.Lorentz`), ``drude`` (:class:`~layerstack_jax.Drude`),
+  ``tauc_lorentz``, ``cody_lorentz``, ``cauchy_urbach``; a coefficient is a number or, for
+  several oscillators, a list; n and k both come from the model (no ``k`` key).
+
+In ``[[layers]]``, any scalar coefficient of a model, and the Cauchy coefficients, can be
+declared free like a thickness: ``A = { value = 150, free = true, min = 10, max = 500 }`` or
+``cauchy = [{ value = 1.46, free = true, min = 1.3, max = 1.7 }, 0.004]`` (fitted as
+``tauc_lorentz.A[film]``, ``cauchy.A[film]``; no default bounds: give them).
 
 Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
 an error. Relative file names are taken relative to the directory of the TOML file.

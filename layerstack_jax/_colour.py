@@ -51,9 +51,10 @@ Conventions and method
   21–30 (2005), eqs. 1–22), with k_L = k_C = k_H = 1 by default.
 
 Gradients: the square roots and atan2 of the CIELAB/ΔE formulas are non-differentiable at zero
-chroma (neutral greys) and at zero colour difference. They are guarded (``_safe_sqrt``,
-``_safe_atan2``) so that gradients there are finite (the zero sub-gradient of the cone) instead
-of NaN; away from those points the gradients are exact.
+chroma (neutral greys) and at zero colour difference. They are guarded
+(:func:`~layerstack_jax._numerics.safe_sqrt`, :func:`~layerstack_jax._numerics.safe_atan2`) so
+that gradients there are finite (the zero sub-gradient of the cone) instead of NaN; away from
+those points the gradients are exact.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._numerics import safe_atan2, safe_sqrt
 from ._validate import LayerstackError, is_concrete
 
 __all__ = [
@@ -275,18 +277,6 @@ class ColourSpace(eqx.Module):
 
 
 # ------------------------------------------------------------------------- pure functions
-def _safe_sqrt(x):
-    """sqrt with a zero (sub)gradient at x = 0 instead of NaN."""
-    positive = x > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
-
-
-def _safe_atan2(y, x):
-    """atan2 with atan2(0, 0) = 0 and a zero gradient there instead of NaN."""
-    zero = (x == 0) & (y == 0)
-    return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x)))
-
-
 def xyz_to_xyy(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Optional[ArrayLike] = None) -> Float[Array, "*batch 3"]:
     """x = X/(X+Y+Z), y = Y/(X+Y+Z), Y. For black (X+Y+Z = 0) x, y are those of ``white_XYZ``
     (colour-science's convention), or 0 if no white is given.
@@ -345,7 +335,7 @@ def delta_e_ab(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batc
     ``(*batch)`` in CIELAB units (dimensionless).
     """
     d = jnp.asarray(lab1) - jnp.asarray(lab2)
-    return _safe_sqrt(jnp.sum(d * d, axis=-1))
+    return safe_sqrt(jnp.sum(d * d, axis=-1))
 
 
 def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batch 3"], *,
@@ -365,13 +355,13 @@ def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*ba
     deg = jnp.pi / 180.0
 
     # eqs. 2–5: a' rescaled around the neutral axis, C', h'
-    C_ab_mean = 0.5 * (_safe_sqrt(a1**2 + b1**2) + _safe_sqrt(a2**2 + b2**2))
+    C_ab_mean = 0.5 * (safe_sqrt(a1**2 + b1**2) + safe_sqrt(a2**2 + b2**2))
     C7 = C_ab_mean**7
-    G = 0.5 * (1.0 - _safe_sqrt(C7 / (C7 + 25.0**7)))
+    G = 0.5 * (1.0 - safe_sqrt(C7 / (C7 + 25.0**7)))
     a1p, a2p = (1.0 + G) * a1, (1.0 + G) * a2
-    C1p, C2p = _safe_sqrt(a1p**2 + b1**2), _safe_sqrt(a2p**2 + b2**2)
-    h1p = jnp.mod(_safe_atan2(b1, a1p) / deg, 360.0)
-    h2p = jnp.mod(_safe_atan2(b2, a2p) / deg, 360.0)
+    C1p, C2p = safe_sqrt(a1p**2 + b1**2), safe_sqrt(a2p**2 + b2**2)
+    h1p = jnp.mod(safe_atan2(b1, a1p) / deg, 360.0)
+    h2p = jnp.mod(safe_atan2(b2, a2p) / deg, 360.0)
 
     # eqs. 8–12: differences
     chromatic = (C1p * C2p) != 0
@@ -380,7 +370,7 @@ def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*ba
     dh = h2p - h1p
     dhp = jnp.where(dh > 180.0, dh - 360.0, jnp.where(dh < -180.0, dh + 360.0, dh))
     dhp = jnp.where(chromatic, dhp, 0.0)
-    dHp = 2.0 * _safe_sqrt(C1p * C2p) * jnp.sin(0.5 * dhp * deg)
+    dHp = 2.0 * safe_sqrt(C1p * C2p) * jnp.sin(0.5 * dhp * deg)
 
     # eqs. 13–14: means
     Lp_mean = 0.5 * (L1 + L2)
@@ -395,7 +385,7 @@ def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*ba
          + 0.32 * jnp.cos((3.0 * hp_mean + 6.0) * deg) - 0.20 * jnp.cos((4.0 * hp_mean - 63.0) * deg))
     d_theta = 30.0 * jnp.exp(-(((hp_mean - 275.0) / 25.0) ** 2))
     Cp7 = Cp_mean**7
-    R_C = 2.0 * _safe_sqrt(Cp7 / (Cp7 + 25.0**7))
+    R_C = 2.0 * safe_sqrt(Cp7 / (Cp7 + 25.0**7))
     L50 = (Lp_mean - 50.0) ** 2
     S_L = 1.0 + 0.015 * L50 / jnp.sqrt(20.0 + L50)
     S_C = 1.0 + 0.045 * Cp_mean
@@ -404,4 +394,4 @@ def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*ba
 
     # eq. 22
     tL, tC, tH = dLp / (k_L * S_L), dCp / (k_C * S_C), dHp / (k_H * S_H)
-    return _safe_sqrt(tL**2 + tC**2 + tH**2 + R_T * tC * tH)
+    return safe_sqrt(tL**2 + tC**2 + tH**2 + R_T * tC * tH)

@@ -73,8 +73,10 @@ import equinox as eqx
 from ._coherent import packet_amplitudes
 from ._geometry import Geometry
 from ._custom_types import Array, Complex, Float, RealLike
+from ._illumination import snell_invariant
+from ._numerics import safe_abs, safe_atan2
 from ._stack import ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, is_concrete
+from ._validate import LayerstackError, check_angle_deg, is_concrete
 
 __all__ = ["Ellipsometry", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
 
@@ -128,19 +130,6 @@ def wrap_degrees(angle_deg):
     return 180.0 - jnp.remainder(180.0 - jnp.asarray(angle_deg), 360.0)
 
 
-def _safe_atan2(y, x):
-    """atan2 with a zero (not NaN) gradient at the origin (trap 3: double where)."""
-    origin = (x == 0) & (y == 0)
-    return jnp.where(origin, 0.0, jnp.arctan2(jnp.where(origin, 1.0, y), jnp.where(origin, 1.0, x)))
-
-
-def _safe_abs(z):
-    """|z| with a zero (not NaN) gradient at z = 0."""
-    sq = jnp.real(z) ** 2 + jnp.imag(z) ** 2
-    zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq)))
-
-
 def psi_delta(r_s, r_p):
     r""":math:`(\psi, \Delta)` in radians from the amplitude reflection coefficients.
 
@@ -152,9 +141,9 @@ def psi_delta(r_s, r_p):
     :math:`e^{-i\omega t}`), broadcast against each other to ``(*B)`` (e.g. ``(*angle, wl)``).
     Returns ``(psi, delta)``, each ``(*B)``, in radians: ψ in [0, π/2], Δ in (−π, π].
     """
-    psi = _safe_atan2(_safe_abs(r_p), _safe_abs(r_s))
+    psi = safe_atan2(safe_abs(r_p), safe_abs(r_s))
     c = r_s * jnp.conj(r_p)  # arg = -arg(r_p / r_s): the sign ellipsometers report
-    delta = _safe_atan2(jnp.imag(c), jnp.real(c))
+    delta = safe_atan2(jnp.imag(c), jnp.real(c))
     # atan2(-0.0, x < 0) = -pi: a real negative rho must give +pi (range (-pi, pi]).
     delta = jnp.where(delta <= -jnp.pi, jnp.pi, delta)
     return psi, delta
@@ -169,17 +158,8 @@ def _check_coherent(stack: Stack) -> None:
             )
 
 
-def _check_angle_deg(name: str, angle_deg) -> None:
-    if is_concrete(angle_deg):
-        import numpy as np
-
-        a = np.asarray(angle_deg, dtype=float)
-        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a >= 90):
-            raise LayerstackError(f"{name} must lie in [0, 90) degrees")
-
-
 def _amplitudes_resolved(rs: ResolvedStack, angle_rad):
-    s = jnp.real(rs.n[0]) * jnp.sin(jnp.asarray(angle_rad))[..., None]
+    s = snell_invariant(rs.n[0], angle_rad)
     gamma, _, _ = packet_amplitudes(rs.n, rs.d, s, rs.wavelength)
     shape = jnp.broadcast_shapes(gamma.shape[1:], jnp.shape(s)[:-1] + (rs.wavelength.shape[-1],))
     return jnp.broadcast_to(gamma[0], shape), jnp.broadcast_to(gamma[1], shape)
@@ -198,7 +178,7 @@ def reflection_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
         ``(r_s, r_p)``, complex arrays shaped ``(*angle, wl)`` (module conventions).
     """
     _check_coherent(stack)
-    _check_angle_deg("angle_deg", angle_deg)
+    check_angle_deg("angle_deg", angle_deg)
     rs = resolve(stack, wavelength_nm)
     return _amplitudes_resolved(rs, jnp.deg2rad(angle_deg))
 
@@ -250,7 +230,7 @@ class Ellipsometric(Geometry):
             raise LayerstackError(
                 f"Ellipsometric.quantity must be one of {', '.join(map(repr, QUANTITIES))}, got {self.quantity!r}"
             )
-        _check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
+        check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
 
     spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im"
     signed: ClassVar[bool] = True  # Δ, C, S, Re ρ, Im ρ may be negative

@@ -27,6 +27,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._custom_types import Array, Float, RealLike
+from ._fresnel import exit_medium_ratio
 from ._illumination import _snell, diffuse_joined, diffuse_resolved, hemisphere, natural_T_front
 from ._optics import Optics, check_optics, coherent_films
 from ._quadrature import DEFAULT_NODES
@@ -37,7 +38,6 @@ from ._validate import LayerstackError, check_angle_deg, is_concrete
 # the illumination drivers are public through this module too (their historical home)
 from ._illumination import Diffuse, Response, diffuse, specular  # noqa: F401  (re-exported)
 
-_diffuse_resolved = diffuse_resolved  # deprecated private alias, kept for modules not yet moved to _illumination
 
 __all__ = [
     "Geometry",
@@ -53,11 +53,6 @@ __all__ = [
 ]
 
 _KINDS: list = []  # concrete geometry classes, in registration order (parse_geometry tries each)
-
-
-def _exit_ratio(rs: ResolvedStack):
-    r"""The exit-medium ratio :math:`(n_0/n_g)^2` of the radiance formulas (Simonot eqs. 77, 79)."""
-    return (jnp.real(rs.n[0]) / jnp.real(rs.n[-1])) ** 2
 
 
 def _scalar_text(x) -> str:
@@ -294,7 +289,8 @@ class Directional(Geometry):
         view = join_interfaces(rs, o.viewing, both_sides=False)
         d, rho = _diffuse_back(rs, o), rs.rho_g
         # Simonot eqs. 77, 79: (n0/n_g)² T(θ0) T(θ0') ρg / (1 − ρg r_b)
-        return _exit_ratio(rs) * natural(front.T_front) * natural(view.T_front) * rho / (1.0 - rho * d.r)
+        ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
+        return ratio * natural(front.T_front) * natural(view.T_front) * rho / (1.0 - rho * d.r)
 
     @property
     def label(self):
@@ -313,7 +309,8 @@ class Directional(Geometry):
 
     def background_factor(self, rs, nodes):
         d = diffuse_resolved(rs, "back", nodes)
-        A = _exit_ratio(rs) * natural_T_front(rs, self.incidence_deg) * natural_T_front(rs, self.viewing_deg)
+        ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
+        A = ratio * natural_T_front(rs, self.incidence_deg) * natural_T_front(rs, self.viewing_deg)
         return A, d.r, lambda measured: measured
 
 

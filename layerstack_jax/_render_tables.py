@@ -34,6 +34,7 @@ import numpy as np
 
 from ._coated_rough import check_coated_stack, check_options, rough_diffuse, rough_specular
 from ._he_torrance import auto_terms, check_roughness
+from ._illumination import snell_invariant_from_cos
 from ._response import natural
 from ._stack import Stack, resolve
 from ._validate import LayerstackError, check_unit_interval
@@ -84,15 +85,11 @@ def angle_grid(n: int, spacing: str = "theta") -> np.ndarray:
     raise LayerstackError(f"spacing must be 'theta' or 'cos', got {spacing!r}")
 
 
-def _snell(n0, cos):
-    return n0 * jnp.sqrt(jnp.clip(1.0 - cos * cos, 0.0, 1.0))
-
-
 @eqx.filter_jit
 def _specular_tables(stack, wl, cos, sigma0, tau, shadowing_form):
     rs = resolve(stack, wl)
     n0 = jnp.real(jnp.asarray(rs.n[0]))
-    R, T = rough_specular(rs, _snell(n0, cos)[:, None], sigma0, tau, shadowing_form=shadowing_form)
+    R, T = rough_specular(rs, snell_invariant_from_cos(n0, cos)[:, None], sigma0, tau, shadowing_form=shadowing_form)
     return natural(R), natural(T)
 
 
@@ -101,7 +98,8 @@ def _diffuse_block(stack, wl, cos_in, cos_out, phi, sigma0, tau, albedo, n_terms
     """k_d on one block of incidence cosines: ``(block, B, P, L)`` (1/sr)."""
     rs = resolve(stack, wl)
     n0 = jnp.real(jnp.asarray(rs.n[0]))
-    return natural(rough_diffuse(rs, _snell(n0, cos_in)[:, None, None, None], _snell(n0, cos_out)[None, :, None, None],
+    s_in, s_out = snell_invariant_from_cos(n0, cos_in), snell_invariant_from_cos(n0, cos_out)
+    return natural(rough_diffuse(rs, s_in[:, None, None, None], s_out[None, :, None, None],
                          phi[None, None, :, None], sigma0, tau, n_terms=n_terms, uniform_albedo=albedo, form=form,
                          shadowing_form=shadowing_form))
 

@@ -57,15 +57,8 @@ except TypeError:
 t_p1 = best(p1, ang)
 
 import fitting
-WLF = np.linspace(380.0, 780.0, 401)
+from benchmarks.fitting_cases import WL as WLF, _f1_stack as f1_stack  # the same in both trees
 B = fitting.bspline_basis(WLF, 3)
-def f1_stack(h_top, alpha_mid):
-    band = 1e-6 + 3e-5 * np.exp(-(((WLF - 550.0) / 25.0) ** 2))
-    return ls.Stack(1.0, [
-        ls.Layer(1.52, h_top, coherent=False, alpha=band, name="top"),
-        ls.Layer(ls.Cauchy(1.50, 0.004), 15_000.0, coherent=False, alpha=alpha_mid, name="ink"),
-        ls.Layer(1.45, 8_000.0, coherent=False, alpha=1e-6, name="primer"),
-    ], ls.LambertianBackground(1.5, 0.15 + 0.6 / (1 + np.exp(-(WLF - 560.0) / 25.0))))
 rng = np.random.default_rng(1)
 n = 200
 hc = np.column_stack([rng.uniform(15_000.0, 30_000.0, n), rng.uniform(0.5e-5, 4e-5, (n, 3))])

@@ -72,7 +72,7 @@ n = { drude = { Ep = 9.0, gamma = 0.07 } }
 name = "c"
 thickness_nm = 10
 coherent = true
-n = { cody_lorentz = { Eg = 1.6, A = 50.0, E0 = 3.6, gamma = 2.0, Ep = 1.0, Et = 0.2, Eu = 0.05, eps_inf = 1.0 } }
+n = { cody_lorentz = { Eg = 1.6, A = 50.0, E0 = 3.6, gamma = 2.0, Ep = 1.0, Et = 1.8, Eu = 0.05, eps_inf = 1.0 } }
 [[layers]]
 name = "d"
 thickness_nm = 10
@@ -86,7 +86,7 @@ n = 1.5
     wl = np.linspace(400.0, 800.0, 5)
     refs = [ls.Lorentz(A=np.array([10.0, 5.0]), E0=np.array([3.0, 5.0]), gamma=np.array([0.1, 0.2]), eps_inf=1.5),
             ls.Drude(Ep=9.0, gamma=0.07),
-            ls.CodyLorentz(Eg=1.6, A=50.0, E0=3.6, gamma=2.0, Ep=1.0, Et=0.2, Eu=0.05, eps_inf=1.0),
+            ls.CodyLorentz(Eg=1.6, A=50.0, E0=3.6, gamma=2.0, Ep=1.0, Et=1.8, Eu=0.05, eps_inf=1.0),
             ls.CauchyUrbach(A=1.5, B=0.005, k0=0.01, Eb=3.5, Eu=0.3)]
     for layer, ref in zip(stack.layers, refs):
         np.testing.assert_allclose(np.asarray(layer.index(wl)), np.asarray(ref(wl)), rtol=0, atol=1e-14)

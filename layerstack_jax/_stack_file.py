@@ -134,6 +134,8 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
         return _model_material(where, kind, value, path, free)
     if kind == "cauchy":
         if isinstance(value, list) and any(isinstance(v, dict) for v in value):  # free coefficients
+            if len(value) > 3:
+                raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {len(value)}", "n")
             value = [_coefficient(where, "cauchy", c, v, path, free) for c, v in zip("ABC", value)]
         coef = read_number_list(where, "n", value, "cauchy coefficients [A, B, C]")
         if coef.size > 3:

@@ -114,6 +114,7 @@ def test_free_model_coefficients_are_fitted(tmp_path):
     ("{ tauc_lorentz = { Eg = 3.2, A = 150, C = 1.5 } }", "tauc_lorentz needs E0"),
     ("{ drude = 9.0 }", "drude must be an inline table of its coefficients"),
     ("{ lorentz = { A = 10, E0 = 3, gamma = -1 } }", "gamma"),
+    ("{ cauchy = [{ value = 1.5, free = true }, 0.004, 0.0, 1.0] }", "cauchy takes 1 to 3 coefficients"),
 ])
 def test_model_errors_name_the_coefficient(tmp_path, n_spec, message):
     (tmp_path / "e.toml").write_text(f"""

@@ -12,17 +12,15 @@ inline roles and blocks, which Markdown would print verbatim. Before rendering, 
 * in a ``Raises:`` section, a wrapped line written at the indentation of the items (not
   ``Error: …``) → indented as the continuation it is (Google style wants it deeper).
 
-``\\`x\\``` (double backticks) is already a Markdown code span. Public names: a module without
-``__all__`` (``layerstack_jax``, ``layerstack_jax.render``) re-exports its API as
-``from ._x import Name as Name``; those redundant aliases are taken as the module's exports, so
-mkdocstrings lists them (a module with ``__all__`` keeps it).
+``\\`x\\``` (double backticks) is already a Markdown code span. Public names: every documented
+package (``layerstack_jax``, ``layerstack_jax.io``, ``layerstack_jax.render``, ``fitting``) lists
+them in ``__all__``, which griffe reads as the module's exports.
 
 Loaded by ``mkdocs.yml`` (``plugins: mkdocstrings: handlers: python: options: extensions``).
 """
 
 from __future__ import annotations
 
-import ast
 import re
 from typing import Any
 
@@ -112,26 +110,9 @@ def rst_to_markdown(doc: str) -> str:
                      for verbatim, block in runs if block)
 
 
-def _redundant_aliases(module: griffe.Module) -> list[str]:
-    """Names imported as ``from .x import Name as Name`` in the module's source, in order."""
-    try:
-        tree = ast.parse(module.filepath.read_text(encoding="utf-8"))  # type: ignore[union-attr]
-    except (AttributeError, OSError, SyntaxError):
-        return []
-    return [a.asname for node in tree.body if isinstance(node, ast.ImportFrom)
-            for a in node.names if a.asname is not None and a.asname == a.name.split(".")[-1]]
-
-
 class RstToMarkdown(griffe.Extension):
-    """Rewrite reST in every docstring; take redundant aliases as the exports of a module
-    that has no ``__all__``."""
+    """Rewrite reST in every docstring."""
 
     def on_instance(self, *, obj: griffe.Object, **kwargs: Any) -> None:  # noqa: D102
         if obj.docstring is not None:
             obj.docstring.value = rst_to_markdown(obj.docstring.value)
-
-    def on_module_members(self, *, mod: griffe.Module, **kwargs: Any) -> None:  # noqa: D102
-        if mod.exports is None and mod.is_init_module:
-            names = _redundant_aliases(mod)
-            if names:
-                mod.exports = names

@@ -2,14 +2,16 @@
 
 ``mkdocs build --strict`` (mkdocs.yml: mkdocs-material, mkdocstrings from the docstrings) runs
 once per session into a temporary folder; a docstring that breaks the reference, a broken link
-between pages or a public name missing from the reference fails here. The public names are taken
-from the imported packages (``__all__`` where defined, otherwise every public non-module name of
-the package), independently of how the reference pages list them. The reST-to-Markdown rewriting
+between pages or a public name missing from the reference fails here. The public names are the
+packages' ``__all__``, which must list exactly the public non-module names each package defines
+or re-exports (checked here from the imported modules), independently of how the reference pages
+list them. The reST-to-Markdown rewriting
 of ``docs/griffe_rst.py`` is checked on hand-written docstrings.
 """
 
 from __future__ import annotations
 
+import __future__
 import html
 import importlib
 import importlib.util
@@ -47,10 +49,19 @@ def site(tmp_path_factory) -> Path:
 
 def public_names(module_name: str) -> list[str]:
     module = importlib.import_module(module_name)
-    names = getattr(module, "__all__", None)
-    if names is None:
-        names = [n for n, v in vars(module).items() if not n.startswith("_") and not inspect.ismodule(v)]
-    return list(names)
+    assert hasattr(module, "__all__"), f"{module_name} has no __all__"
+    return list(module.__all__)
+
+
+@pytest.mark.parametrize("module_name", list(REFERENCE))
+def test_all_lists_exactly_the_public_names(module_name):
+    module = importlib.import_module(module_name)
+    names = public_names(module_name)
+    defined = {n for n, v in vars(module).items() if not n.startswith("_") and not inspect.ismodule(v)
+               and not isinstance(v, __future__._Feature)}
+    assert len(names) == len(set(names)), f"{module_name}.__all__ has duplicates"
+    assert set(names) == defined, (f"{module_name}.__all__ vs its public names: missing {sorted(defined - set(names))}, "
+                                   f"not defined {sorted(set(names) - defined)}")
 
 
 def page_text(site: Path, page: str) -> str:

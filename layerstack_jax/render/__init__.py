@@ -14,3 +14,13 @@ from ._mitsuba import PLUGIN_NAME as PLUGIN_NAME
 from ._mitsuba import coated_bsdf as coated_bsdf
 from ._mitsuba import import_mitsuba as import_mitsuba
 from ._mitsuba import register as register
+
+__all__ = [
+    "coated_bsdf",
+    "CoatingTables",
+    "DEFENSIVE",
+    "import_mitsuba",
+    "PLUGIN_NAME",
+    "register",
+    "TableSurface",
+]

@@ -102,8 +102,66 @@ def _norm(s: str) -> str:
 
 
 def material_sources(book: str, shelf: Optional[str] = None) -> list[tuple[str, str]]:
-    """The pages (``(page id, title)``) available for a material id, e.g. ``material_sources("Au")``."""
-    return [(p.page, p.name) for p in _book_pages(book, shelf)]
+    """The pages ``(page id, title)`` available for a material id, e.g. ``material_sources("Si")``.
+
+    The title is the database's, followed by the sample's form in brackets where the page's own
+    words give it (:func:`_page_form`): ``("Pierce", "Pierce and Spicer 1972: n,k 0.0103–2.07 µm
+    [amorphous, thin film]")`` — amorphous-Si pages share the book ``Si`` with the crystal's.
+    """
+    return [(p.page, _title(p)) for p in _book_pages(book, shelf)]
+
+
+#: The forms of a sample and the words that say it (``a-Si``, ``a-C:H`` case-sensitive, the rest
+#: not), in the order listed. "amorphous" and "polycrystalline" win over "crystalline" (a film's
+#: page names its c-Si substrate).
+_FORMS = (
+    ("amorphous", re.compile(r"(?i:\bamorphous\b)|\ba-[A-Z]")),
+    ("polycrystalline", re.compile(r"(?i:poly-?crystal|\bpoly-Si\b)")),
+    ("crystalline", re.compile(r"(?i:(?<![a-z])(?:mono)?crystalline|single[- ]crystal|crystal\s+orientation|\bc-Si\b)")),
+    ("thin film", re.compile(r"(?i:\bfilms?\b)")),
+)
+
+
+def _page_words(page: _Page) -> tuple[str, set]:
+    """The page's own words about its sample: the title, the ``COMMENTS`` and the titles of the
+    ``REFERENCES`` (links — journal names such as *Thin Solid Films* — and markup removed), and
+    the keys of its ``CONDITIONS`` (``film_thickness``, ``substrate`` …). Only the header of the
+    page file is read (it precedes ``DATA``)."""
+    head = []
+    with open(page.path, encoding="utf-8") as f:
+        for line in f:
+            if line.startswith("DATA:"):
+                break
+            head.append(line)
+    import yaml
+
+    meta = yaml.load("".join(head), Loader=getattr(yaml, "CBaseLoader", yaml.BaseLoader)) or {}
+    refs = re.sub(r"<a\b.*?</a>", " ", str(meta.get("REFERENCES", "")), flags=re.DOTALL)
+    refs = re.sub(r"Thin Solid Films", " ", refs, flags=re.IGNORECASE)
+    text = " ".join([page.name, str(meta.get("COMMENTS", "")), refs])
+    conditions = meta.get("CONDITIONS")
+    return re.sub(r"<[^>]+>", " ", text), set(conditions) if isinstance(conditions, dict) else set()
+
+
+@functools.lru_cache(maxsize=None)
+def _page_form(page: _Page) -> tuple[str, ...]:
+    """The form of the sample — ``amorphous``, ``polycrystalline``, ``crystalline``, ``thin
+    film`` — where the page's words (:func:`_page_words`) say so (:data:`_FORMS`; a film's
+    ``CONDITIONS`` with ``film_thickness`` or ``substrate`` says thin film); () when they say
+    nothing: the database does not describe every sample."""
+    text, conditions = _page_words(page)
+    forms = [name for name, words in _FORMS if words.search(text)]
+    if "amorphous" in forms or "polycrystalline" in forms:
+        forms = [f for f in forms if f != "crystalline"]
+    if conditions & {"film_thickness", "substrate"} and "thin film" not in forms:
+        forms.append("thin film")
+    return tuple(forms)
+
+
+def _title(page: _Page) -> str:
+    """The page title with its form (:func:`_page_form`) in brackets, as listed to users."""
+    form = _page_form(page)
+    return f"{page.name} [{', '.join(form)}]" if form else page.name
 
 
 def _book_pages(book: str, shelf: Optional[str]) -> list[_Page]:
@@ -122,7 +180,7 @@ def _book_pages(book: str, shelf: Optional[str]) -> list[_Page]:
 
 
 def _listing(pages, limit: int = 12) -> str:
-    lines = [f"  {p.page!r}: {p.name}" for p in pages[:limit]]
+    lines = [f"  {p.page!r}: {_title(p)}" for p in pages[:limit]]
     if len(pages) > limit:
         lines.append(f"  … and {len(pages) - limit} more (material_sources({pages[0].book!r}) lists them)")
     return "\n".join(lines)

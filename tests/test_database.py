@@ -5,6 +5,7 @@ scipy interpolation and numpy formulas); a stack of database materials against `
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -197,7 +198,6 @@ def test_stack_of_database_materials_vs_tmm():
 
 
 def test_shipped_example_with_database_materials():
-    from pathlib import Path
 
     stack = ls.load_stack(Path(__file__).resolve().parent.parent / "examples" / "silica_on_gold.toml")
     assert isinstance(stack.layers[0].index, ls.DatabaseFormula)
@@ -205,3 +205,29 @@ def test_shipped_example_with_database_materials():
     R = np.asarray(ls.reflectance(stack, np.arange(380.0, 781.0, 20.0), ls.Specular(8.0, "R")))
     assert np.all((R > 0) & (R < 1))
     assert R[-1] > 0.9 and R[0] < 0.5  # gold: dark in the blue, bright in the red
+
+
+def test_material_sources_name_the_form_the_database_gives():
+    """Issue 15: amorphous-Si pages were listed as plain "Si" sources. The pages' own words
+    (read from the shipped files): Pierce "Amorphous silicon (α-Si or a-Si). 60-nm film.",
+    Karaman-* "Amorphous silicon (a-Si) … 100 nm film on fused silica substrate.", Franta (2013)
+    "Film a-Si:H"; Schinke's reference "… of crystalline silicon", Aspnes's comment "Crystal
+    orientation: <111>"; Li 1980 says nothing (no form)."""
+    import yaml
+
+    sources = dict(ls.material_sources("Si"))
+    amorphous = {page for page, title in sources.items() if "amorphous" in title}
+    assert amorphous == {"Pierce", "Franta", *(f"Karaman-{t}C" for t in (20, 70, 120, 170, 220))}
+    assert sources["Pierce"] == "Pierce and Spicer 1972: n,k 0.0103–2.07 µm [amorphous, thin film]"
+    assert sources["Karaman-20C"].endswith("[amorphous, thin film]")
+    assert sources["Schinke"].endswith("[crystalline]") and sources["Aspnes"].endswith("[crystalline]")
+    assert sources["Li-293K"] == "Li 1980: n 1.2–14 µm; 293 K"
+    # independently: every Si page whose COMMENTS say "amorphous" is listed as amorphous, and no other
+    root = Path(ri.__file__).parent / "database" / "data" / "main" / "Si" / "nk"
+    said = {f.stem for f in root.glob("*.yml")
+            if "amorphous" in str(yaml.safe_load(f.read_text(encoding="utf-8")).get("COMMENTS", "")).lower()}
+    assert said == amorphous
+    # the listing of an ambiguous source shows the form too; the material is the page's
+    with pytest.raises(ls.LayerstackError, match=r"'Karaman-70C': Karaman et al. 2025: .* \[amorphous, thin film\]"):
+        ls.material("Si", "Karaman")
+    assert "amorphous" not in ls.material("Si", "Pierce").name  # names stay the database's titles

@@ -3,7 +3,9 @@ their bounds, their spectral basis, and how they are packed into one flat vector
 
 A :class:`Parameter` names one numeric leaf of the stack by its *path*, e.g.
 ``("layers", "varnish", "thickness")`` or ``("exit", "reflectance")``; layers may be given by
-position or by name. Its value is a vector of *coefficients* :math:`c` (one number for a
+position or by name. A path may end with an element index into a 1-D array leaf — one term of
+a Sellmeier ``B`` (``("layers", "glass", "index", "B", 0)``), one oscillator of a list — so that
+single entries are fitted while the others stay as in the stack. Its value is a vector of *coefficients* :math:`c` (one number for a
 scalar leaf). A spectral leaf (α(λ), ρg(λ), n(λ)) is :math:`v = B c` on the model wavelength grid,
 with ``B`` of shape ``(wl, m)``: the identity (``basis="free"``: one free value per wavelength),
 a clamped B-spline basis of ``m`` functions (``basis=m``, :func:`bspline_basis`) or any matrix.
@@ -78,7 +80,10 @@ class Parameter:
     Attributes:
         name: label in reports (default: built from the path).
         path: location of the leaf, e.g. ``("layers", 0, "thickness")``, ``("layers", "varnish",
-            "alpha")``, ``("exit", "reflectance")``, ``("layers", 1, "index", "A")``.
+            "alpha")``, ``("exit", "reflectance")``, ``("layers", 1, "index", "A")``; a final
+            integer addresses one element of an array leaf (``("layers", 1, "index", "B", 0)``:
+            the first Sellmeier term) or, before it, an entry of a tuple (``("layers", 0,
+            "index", "materials", 0, "A")``: a constituent of an effective medium).
         kind: ``thickness`` (nm), ``alpha`` (1/nm), ``rho_g``, ``n``, ``coefficient`` or
             ``other``; decides the default bounds.
         value: starting value (coefficients), or None to take it from the stack. Scalar,
@@ -279,9 +284,9 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
         raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
     node = stack
     where = "stack"
-    for part in path:
-        if isinstance(part, int):
-            node = node[part]
+    for i, part in enumerate(path):
+        if isinstance(part, (int, np.integer)) and not isinstance(part, bool):
+            node = _item(node, int(part), i == len(path) - 1, where, label)
             where += f"[{part}]"
             continue
         if not hasattr(node, part) or part.startswith("_"):
@@ -300,15 +305,50 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
         )
     if path[0] == "exit" and path[-1] == "reflectance" and not isinstance(stack.exit, LambertianBackground):
         raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
-    if path[-2:-1] == ("index",) and path[-1] in ("n", "k", "A", "B", "C"):
-        mat = get_path(stack, path[:-1])
+    field = path[:-1] if element_of(stack, path) is not None else path
+    if field[-2:-1] == ("index",) and field[-1] in ("n", "k", "A", "B", "C"):
+        mat = get_path(stack, field[:-1])
         allowed = {Index: ("n", "k"), Cauchy: ("A", "B", "C", "k"), Sellmeier: ("B", "C", "k")}
-        if type(mat) in allowed and path[-1] not in allowed[type(mat)]:
+        if type(mat) in allowed and field[-1] not in allowed[type(mat)]:
             raise LayerstackError(
-                f"free parameter {label!r}: {type(mat).__name__} has no coefficient {path[-1]!r} "
+                f"free parameter {label!r}: {type(mat).__name__} has no coefficient {field[-1]!r} "
                 f"(it has {allowed[type(mat)]})"
             )
     return path
+
+
+def _is_array_leaf(node) -> bool:
+    return hasattr(node, "shape") and not isinstance(node, eqx.Module)
+
+
+def _item(node, i: int, last: bool, where: str, label: str):
+    """``node[i]`` on a path: an entry of a list or tuple of the stack (layers, the materials of
+    an effective medium), or — last on the path only — one element of a 1-D array leaf (a
+    Sellmeier B or C, an oscillator list): ``("layers", "glass", "index", "B", 0)``."""
+    if isinstance(node, (list, tuple)):
+        if not 0 <= i < len(node):
+            raise LayerstackError(f"free parameter {label!r}: {where} has {len(node)} entries, no entry {i}")
+        return node[i]
+    if isinstance(node, (int, float)):
+        raise LayerstackError(f"free parameter {label!r}: {where} is a number, not a list: free the number itself")
+    if not _is_array_leaf(node):
+        raise LayerstackError(f"free parameter {label!r}: {where} ({type(node).__name__}) has no entry {i}")
+    if not last:
+        raise LayerstackError(f"free parameter {label!r}: an element index ({where}[{i}]) must end the path")
+    if np.ndim(node) != 1:
+        raise LayerstackError(f"free parameter {label!r}: {where} has shape {np.shape(node)}; an element index "
+                              "addresses a list of coefficients (1-D)" + ("" if np.ndim(node) else
+                                                                          ": free the number itself"))
+    if not 0 <= i < np.shape(node)[0]:
+        raise LayerstackError(f"free parameter {label!r}: {where} has {np.shape(node)[0]} elements, no element {i}")
+    return node[i]
+
+
+def element_of(stack: Stack, path: tuple) -> Optional[int]:
+    """The element index when a canonical ``path`` ends inside an array leaf (:func:`_item`), else None."""
+    if not path or not isinstance(path[-1], (int, np.integer)) or isinstance(path[-1], bool):
+        return None
+    return int(path[-1]) if _is_array_leaf(get_path(stack, path[:-1])) else None
 
 
 def get_path(tree, path: tuple):
@@ -335,7 +375,9 @@ class ResolvedParameter:
     """A parameter checked against a stack and a wavelength grid.
 
     ``basis``: ``(wl, m)`` or None; ``x0``: starting coefficients ``(m,)`` or ``(samples, m)``;
-    ``lower``, ``upper``, ``scale``: ``(m,)``; ``leaf_shape``: shape of the value put in the stack.
+    ``lower``, ``upper``, ``scale``: ``(m,)``; ``leaf_shape``: shape of the value put in the stack;
+    ``element``: when the path ends with an element index into an array leaf (a Sellmeier B
+    term), that index (the value is one number, put at ``leaf[element]``), else None.
     """
 
     parameter: Parameter
@@ -347,6 +389,12 @@ class ResolvedParameter:
     scale: np.ndarray
     leaf_shape: tuple
     fixed: np.ndarray
+    element: Optional[int] = None
+
+    @property
+    def leaf_path(self) -> tuple:
+        """Path of the stack leaf this parameter changes (the array, for an element)."""
+        return self.path if self.element is None else self.path[:-1]
 
     @property
     def name(self) -> str:
@@ -504,7 +552,10 @@ def resolve_parameter(p: Parameter, stack: Stack, wavelength_nm: np.ndarray, n_s
             fixed = np.broadcast_to(f, x0.shape).copy()
         except ValueError:
             raise LayerstackError(f"free parameter {label!r}: fixed mask shaped {f.shape} does not match the value {x0.shape}") from None
-    return ResolvedParameter(p, path, B, x0, lo, hi, scale, leaf_shape, fixed)
+    element = element_of(stack, path)
+    if element is not None and (B is not None or leaf_shape != ()):
+        raise LayerstackError(f"free parameter {label!r}: an element of a list is one number (no basis)")
+    return ResolvedParameter(p, path, B, x0, lo, hi, scale, leaf_shape, fixed, element)
 
 
 # ------------------------------------------------------------------------------ layout
@@ -514,10 +565,19 @@ class Layout:
     def __init__(self, params: Sequence[ResolvedParameter], n_samples: int):
         self.params = tuple(params)
         self.n_samples = n_samples
-        paths = [p.path for p in self.params]
-        for i, p in enumerate(paths):
-            if paths.index(p) != i:
-                raise LayerstackError(f"free parameter {self.params[i].name!r}: the same stack leaf {p} is freed twice")
+        # the stack leaves changed: whole leaves, and arrays some of whose elements are free
+        self._leaf_paths: list = []
+        self._elements: list = []  # per leaf path: [(parameter index, element)] or None (whole leaf)
+        for i, p in enumerate(self.params):
+            lp = p.leaf_path
+            if lp not in self._leaf_paths:
+                self._leaf_paths.append(lp)
+                self._elements.append(None if p.element is None else [(i, p.element)])
+                continue
+            taken = self._elements[self._leaf_paths.index(lp)]
+            if p.element is None or taken is None or p.element in [e for _, e in taken]:
+                raise LayerstackError(f"free parameter {p.name!r}: the same stack leaf {p.path} is freed twice")
+            taken.append((i, p.element))
         sizes = [p.size for p in self.params]
         self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         rep = lambda a, p: np.tile(a, p.x0.shape[0]) if p.per_sample else a  # noqa: E731
@@ -620,12 +680,21 @@ class Layout:
         ``sample`` is None and the arrays are per-sample rows) into ``stack`` (``equinox.tree_at``)."""
         if not self.params:
             return stack
-        values = []
+        leaves = []
         for p, c in zip(self.params, coefficients):
             if p.per_sample and sample is not None:
                 c = c[sample]
-            values.append(p.leaf(c))
-        paths = [p.path for p in self.params]
+            leaves.append(p.leaf(c))
+        values = []
+        for lp, elements in zip(self._leaf_paths, self._elements):
+            if elements is None:
+                values.append(leaves[next(i for i, p in enumerate(self.params) if p.leaf_path == lp)])
+                continue
+            a = jnp.asarray(get_path(stack, lp))  # free elements set, the others as in the stack
+            for i, e in elements:
+                a = a.at[e].set(leaves[i])
+            values.append(a)
+        paths = self._leaf_paths
         return eqx.tree_at(
             lambda st: tuple(get_path(st, path) for path in paths),
             stack,

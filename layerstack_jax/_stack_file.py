@@ -17,6 +17,7 @@ import numpy as np
 
 from ._file_grammar import (FileLocation, check_grid, check_range, is_number, named_tables, read_number,
                             read_number_list, read_toml, reject_unknown_keys)
+from ._effective_medium import Bruggeman, Looyenga
 from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
 from ._oscillators import CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
 from ._spectra_csv import read_csv_columns
@@ -36,7 +37,11 @@ _AMBIENT_KEYS = ("n",)
 #: value = 150, free = true, min = 10, max = 500 }, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }``.
 _MODELS = {"lorentz": Lorentz, "drude": Drude, "tauc_lorentz": TaucLorentz, "cody_lorentz": CodyLorentz,
            "cauchy_urbach": CauchyUrbach}
-_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material") + tuple(_MODELS)
+#: Effective media read by name: ``n = { bruggeman = { materials = [<n>, <n>], fractions = 0.5 } }``,
+#: each constituent written as ``n`` is (a number, a dispersion table, ``{ material = ... }``) or as
+#: ``{ n = ..., k = ... }``; ``fractions`` as the class's (first m − 1 materials; the last fills the rest).
+_MIXTURES = {"bruggeman": Bruggeman, "looyenga": Looyenga}
+_DISPERSION_KEYS = ("cauchy", "sellmeier", "table", "material") + tuple(_MODELS) + tuple(_MIXTURES)
 
 
 def _read_table(where: FileLocation, key: str, base_dir: Path, filename, required, optional=()) -> tuple[Path, dict]:
@@ -56,20 +61,45 @@ def _read_table(where: FileLocation, key: str, base_dir: Path, filename, require
 
 
 # --------------------------------------------------------------------------- materials
-def _coefficient(where: FileLocation, model: str, field: str, spec, path: Optional[tuple], free: Optional[list]):
-    """One coefficient of a dispersion model: a number, a list of numbers (one per oscillator),
-    or a free-parameter table (recorded in ``free`` under ``path + (field,)``; scalars only)."""
+def _coefficient(where: FileLocation, model: str, field: str, spec, path: Optional[tuple], free: Optional[list],
+                 *, lower=None, upper=None):
+    """One coefficient of a dispersion model: a number, a list of numbers (one per oscillator or
+    term), or a free-parameter table — the coefficient itself, recorded in ``free`` under ``path
+    + (field,)`` as ``model.field[layer]``, or one entry of a list, under ``path + (field, i)`` as
+    ``model.field1[layer]``, ``model.field2[layer]`` … (1-based, as vendor software numbers
+    terms). ``lower``/``upper``: the coefficient's physical range; declared bounds must lie in
+    it, and are it when not given."""
     key = f"{model}.{field}"
     if isinstance(spec, dict):
-        if path is None:
-            raise where.error(f"{model}: {field}: free coefficients are declared in [[layers]] only", "n")
-        spec = _split_free(where, key, spec, path + (field,), "other", free, spectral=False)
+        return _free_coefficient(where, key, spec, path, (field,), free, lower, upper)
+    if isinstance(spec, list) and any(isinstance(v, dict) for v in spec):
+        spec = [_free_coefficient(where, f"{key}{i + 1}", v, path, (field, i), free, lower, upper)
+                if isinstance(v, dict) else v for i, v in enumerate(spec)]
     if is_number(spec):
         return float(spec)
     return read_number_list(where, "n", spec, f"{model} {field}")
 
 
-def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple], free: Optional[list]) -> Material:
+def _free_coefficient(where: FileLocation, key: str, spec: dict, path: Optional[tuple], field: tuple,
+                      free: Optional[list], lower, upper) -> float:
+    """A coefficient written as a free-parameter table (:func:`_coefficient`): its value."""
+    if path is None:
+        raise where.error(f"{key}: free coefficients are declared in [[layers]] only", "n")
+    found: list = []
+    value = read_number(where, "n", _split_free(where, key, spec, path + field, "other", found, spectral=False), what=key)
+    if found and (lower is not None or upper is not None):
+        d = found[0]
+        lo, hi = (lower if d.lower is None else d.lower), (upper if d.upper is None else d.upper)
+        if (lower is not None and lo < lower) or (upper is not None and hi > upper):
+            raise where.error(f"{key}: bounds [{lo:g}, {hi:g}] outside the range [{lower:g}, {upper:g}]", "n")
+        found = [d._replace(lower=lo, upper=hi)]
+    if free is not None:
+        free.extend(found)
+    return value
+
+
+def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple], free: Optional[list],
+                    prefix: str = "") -> Material:
     """``n = { <model> = { coefficient = ..., ... } }`` (:data:`_MODELS`)."""
     cls = _MODELS[kind]
     fields = [f for f in dataclasses.fields(cls) if f.init]
@@ -80,7 +110,8 @@ def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple]
     missing = [f.name for f in fields if f.default is dataclasses.MISSING and f.name not in value]
     if missing:
         raise where.error(f"{kind} needs {', '.join(missing)} (coefficients: {', '.join(names)})", "n")
-    coefficients = {name: _coefficient(where, kind, name, value[name], path, free) for name in names if name in value}
+    coefficients = {name: _coefficient(where, prefix + kind, name, value[name], path, free)
+                    for name in names if name in value}
     try:
         return cls(**coefficients)
     except LayerstackError as e:
@@ -88,10 +119,11 @@ def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple]
 
 
 def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_k: bool, label: str,
-                  path: Optional[tuple] = None, free: Optional[list] = None) -> Material:
+                  path: Optional[tuple] = None, free: Optional[list] = None, prefix: str = "") -> Material:
     """The material of a table with an ``n`` key (and optionally ``k``). ``path``: where the
     material sits in the stack (``("layers", name, "index")``) when its coefficients may be
-    declared free; their declarations are appended to ``free``."""
+    declared free; their declarations are appended to ``free``, named ``prefix`` + e.g.
+    ``cauchy.A[layer]`` (``prefix``: the constituent of an effective medium, ``"bruggeman.materials1."``)."""
     if "n" not in table:
         raise where.error("missing (refractive index: a number or a dispersion table)", "n")
     spec = table["n"]
@@ -128,15 +160,17 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
     value = spec[kind]
     if kind == "material":
         return _database_material(where, spec, k_given, allow_k)
-    if kind in _MODELS:
+    if kind in _MODELS or kind in _MIXTURES:
         if k_given:
             raise where.error(f"not allowed with n = {{ {kind} = ... }}: the model gives k itself", "k")
-        return _model_material(where, kind, value, path, free)
+        if kind in _MIXTURES:
+            return _mixture(where, kind, value, base_dir, label, path, free, prefix, allow_k)
+        return _model_material(where, kind, value, path, free, prefix)
     if kind == "cauchy":
         if isinstance(value, list) and any(isinstance(v, dict) for v in value):  # free coefficients
             if len(value) > 3:
                 raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {len(value)}", "n")
-            value = [_coefficient(where, "cauchy", c, v, path, free) for c, v in zip("ABC", value)]
+            value = [_coefficient(where, prefix + "cauchy", c, v, path, free) for c, v in zip("ABC", value)]
         coef = read_number_list(where, "n", value, "cauchy coefficients [A, B, C]")
         if coef.size > 3:
             raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {coef.size}", "n")
@@ -150,8 +184,8 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
         reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n': sellmeier"), value, ("B", "C"))
         if "B" not in value or "C" not in value:
             raise where.error("sellmeier needs both B = [...] and C = [...] (C in µm²)", "n")
-        B = read_number_list(where, "n", value["B"], "sellmeier B")
-        C = read_number_list(where, "n", value["C"], "sellmeier C")
+        B, C = (_coefficient(where, prefix + "sellmeier", c, value[c], path, free) if isinstance(value[c], list)
+                else read_number_list(where, "n", value[c], f"sellmeier {c}") for c in ("B", "C"))
         if B.shape != C.shape:
             raise where.error(f"sellmeier B and C must have the same length, got {B.size} and {C.size}", "n")
         return Sellmeier(B, C, k)
@@ -159,6 +193,40 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
     path, cols = _read_table(where, "n", base_dir, value, ("wavelength_nm", "n"), ("k",))
     return _tabulated(where, cols["wavelength_nm"], cols["n"], cols.get("k"), k_given, k, allow_k,
                       f"{path.name} ({label})", file=str(value))
+
+
+def _mixture(where: FileLocation, kind: str, value, base_dir: Path, label: str, path: Optional[tuple],
+             free: Optional[list], prefix: str, allow_k: bool) -> Material:
+    """``n = { bruggeman = { materials = [<n>, <n>, ...], fractions = f } }`` (:data:`_MIXTURES`):
+    each constituent as ``n`` is written (or ``{ n = ..., k = ... }``), its free coefficients
+    named ``bruggeman.materials1.cauchy.A[layer]``; ``fractions`` the volume fraction(s) of the
+    first m − 1 materials (a number for two, else a list; the last fills the rest), each in
+    [0, 1] and free like any coefficient (default bounds [0, 1]) as ``bruggeman.fractions[layer]``
+    or, in a list, ``bruggeman.fractions1[layer]`` …"""
+    cls = _MIXTURES[kind]
+    inner = FileLocation(where.source, f"{where.table}: key 'n': {kind}")
+    if not isinstance(value, dict):
+        raise where.error(f"{kind} must be an inline table {{ materials = [<n>, <n>], fractions = <number> }}", "n")
+    reject_unknown_keys(inner, value, ("materials", "fractions"))
+    mats, fractions = value.get("materials"), value.get("fractions")
+    if not isinstance(mats, list) or len(mats) < 2:
+        raise where.error(f"{kind} needs materials = [<n>, <n>, ...] (two or more, each written as n is), "
+                          f"got {mats!r}", "n")
+    if fractions is None:
+        raise where.error(f"{kind} needs fractions = <volume fraction of the first material> "
+                          f"(a list of {len(mats) - 1} for {len(mats)} materials; the last fills the rest)", "n")
+    materials = []
+    for i, m in enumerate(mats):
+        table = m if isinstance(m, dict) and "n" in m and set(m) <= {"n", "k"} else {"n": m}
+        at = FileLocation(where.source, f"{where.table}: {kind} material {i + 1}")
+        materials.append(read_material(at, table, base_dir, allow_k=allow_k, label=f"{label} {kind} material {i + 1}",
+                                       path=None if path is None else path + ("materials", i), free=free,
+                                       prefix=f"{prefix}{kind}.materials{i + 1}."))
+    f = _coefficient(where, prefix + kind, "fractions", fractions, path, free, lower=0.0, upper=1.0)
+    try:
+        return cls(materials, f)
+    except LayerstackError as e:
+        raise where.error(f"{kind}: {e}", "n") from None
 
 
 def _database_material(where: FileLocation, spec: Mapping, k_given: bool, allow_k: bool) -> Material:
@@ -458,6 +526,9 @@ def _material_to_dict(m: Material, what: str, out: dict) -> None:
         out["n"] = {"sellmeier": {"B": np.atleast_1d(np.asarray(m.B, float)).tolist(),
                                   "C": np.atleast_1d(np.asarray(m.C, float)).tolist()}}
         k = _scalar(m.k, f"{what} k")
+    elif type(m) in _MODEL_NAMES:  # a dispersion model or an effective medium: its fields by name
+        out["n"] = {_MODEL_NAMES[type(m)]: _fields_to_dict(m, what)}
+        k = 0.0
     elif isinstance(m, Tabulated):
         table = {"wavelength_nm": list(m.wavelength_nm), "n": np.asarray(m.n, float).tolist()}
         if m.k is not None:
@@ -468,6 +539,28 @@ def _material_to_dict(m: Material, what: str, out: dict) -> None:
         raise LayerstackError(f"stack_to_dict: cannot write {what} of type {type(m).__name__}")
     if k != 0.0:
         out["k"] = k
+
+
+_MODEL_NAMES = {cls: name for name, cls in {**_MODELS, **_MIXTURES}.items()}
+
+
+def _number_or_list(x, what: str):
+    if is_concrete(x) and np.ndim(x) == 1:
+        return np.asarray(x, float).tolist()
+    return _scalar(x, what)
+
+
+def _fields_to_dict(m: Material, what: str) -> dict:
+    """The coefficients of a model (:data:`_MODELS`) or the materials and fractions of an effective
+    medium (:data:`_MIXTURES`) as the stack file writes them."""
+    if type(m) in _MIXTURES.values():
+        materials = []
+        for i, c in enumerate(m.materials):
+            sub: dict = {}
+            _material_to_dict(c, f"{what} material {i + 1}", sub)
+            materials.append(sub if "k" in sub else sub["n"])
+        return {"materials": materials, "fractions": _number_or_list(m.fractions, f"{what} fractions")}
+    return {f.name: _number_or_list(getattr(m, f.name), f"{what} {f.name}") for f in dataclasses.fields(m) if f.init}
 
 
 def _spectrum_to_dict(x, what: str):
@@ -482,7 +575,9 @@ def stack_to_dict(stack: Stack) -> dict:
     """The inverse of :func:`stack_from_dict`: a dict in the stack-file schema, tables inline.
 
     Works for stacks made of scalars, :class:`Index` (scalar), :class:`Cauchy`,
-    :class:`Sellmeier`, :class:`Tabulated` and :class:`TabulatedSpectrum`; raises
+    :class:`Sellmeier`, :class:`Tabulated`, :class:`TabulatedSpectrum`, the dispersion models
+    (:class:`TaucLorentz` …) and the effective media (:class:`Bruggeman`, :class:`Looyenga`) of
+    these; raises
     :class:`LayerstackError` for arrays sampled on a grid or traced values.
     """
     d: dict = {"ambient": {}}

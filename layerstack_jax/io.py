@@ -65,12 +65,25 @@ Dispersion: wherever ``n`` is accepted it may also be an inline table with exact
   model by name with its coefficients as the class's fields (units there, eV for energies):
   ``lorentz`` (:class:`~layerstack_jax.Lorentz`), ``drude`` (:class:`~layerstack_jax.Drude`),
   ``tauc_lorentz``, ``cody_lorentz``, ``cauchy_urbach``; a coefficient is a number or, for
-  several oscillators, a list; n and k both come from the model (no ``k`` key).
+  several oscillators, a list; n and k both come from the model (no ``k`` key);
+* ``n = { bruggeman = { materials = [{ material = "Si", source = "Aspnes" }, 1.0], fractions = 0.5 } }``
+  — an effective medium (:class:`~layerstack_jax.Bruggeman`, or ``looyenga``:
+  :class:`~layerstack_jax.Looyenga`) of two or more ``materials``, each written as ``n`` is (a
+  number, any of the dispersions above) or as ``{ n = ..., k = ... }``; ``fractions`` are the
+  volume fractions of the first m − 1 materials, each in [0, 1] (a number for two materials, else
+  a list; the last material fills the rest). The line above is surface roughness on silicon: a
+  50 % void layer. n and k come from the mixture (no ``k`` key).
 
-In ``[[layers]]``, any scalar coefficient of a model, and the Cauchy coefficients, can be
-declared free like a thickness: ``A = { value = 150, free = true, min = 10, max = 500 }`` or
-``cauchy = [{ value = 1.46, free = true, min = 1.3, max = 1.7 }, 0.004]`` (fitted as
-``tauc_lorentz.A[film]``, ``cauchy.A[film]``; no default bounds: give them).
+In ``[[layers]]``, any coefficient of a model, the Cauchy coefficients, the Sellmeier terms, an
+effective medium's fractions and its materials' coefficients can be declared free like a
+thickness: ``A = { value = 150, free = true, min = 10, max = 500 }``, ``cauchy = [{ value = 1.46,
+free = true, min = 1.3, max = 1.7 }, 0.004]``, ``sellmeier = { B = [{ value = 0.7, free = true,
+min = 0.5, max = 0.9 }, 0.41, 0.90], C = [0.0047, 0.0135, 97.9] }``, ``fractions = { value = 0.5,
+free = true }``. They are fitted as ``tauc_lorentz.A[film]``, ``cauchy.A[film]``; an entry of a
+list by its 1-based position, ``sellmeier.B1[glass]``, ``lorentz.A2[film]``,
+``looyenga.fractions2[mix]``; a material of a mixture by its position,
+``bruggeman.materials1.cauchy.A[rough]``. Bounds: give them, except for fractions (default and
+limit [0, 1]); a fraction list's sum ≤ 1 is not a bound, keep the start well inside.
 
 Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
 an error. Relative file names are taken relative to the directory of the TOML file.

@@ -241,6 +241,28 @@ k = 0.5
     passive = roots[np.imag(roots) >= 0]
     assert passive.size == 1
     np.testing.assert_allclose(got, passive[0], rtol=1e-14, atol=0)
+    # the documented line (README, io): roughness on silicon from the database; an absorbing
+    # constituent where the medium must be transparent is refused, naming it
+    (tmp_path / "si.toml").write_text("""
+[[layers]]
+name = "rough"
+thickness_nm = 3
+coherent = true
+n = { bruggeman = { materials = [{ material = "Si", source = "Aspnes" }, 1.0], fractions = 0.5 } }
+[substrate]
+n = { material = "Si", source = "Aspnes" }
+""")
+    wl = np.linspace(300.0, 800.0, 11)
+    np.testing.assert_array_equal(np.asarray(load_stack(tmp_path / "si.toml").layers[0].index(wl)),
+                                  np.asarray(ls.Bruggeman([ls.material("Si", "Aspnes"), 1.0], 0.5)(wl)))
+    (tmp_path / "a.toml").write_text("""
+[ambient]
+n = { looyenga = { materials = [{ n = 1.5, k = 0.1 }, 1.0], fractions = 0.5 } }
+[substrate]
+n = 1.5
+""")
+    with pytest.raises(ls.LayerstackError, match=r"a.toml: \[ambient\]: looyenga material 1: key 'k': not allowed here"):
+        load_stack(tmp_path / "a.toml")
 
 
 def test_free_fraction_and_sellmeier_term_are_fitted(tmp_path):

@@ -39,7 +39,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import Cauchy, Index, LambertianBackground, Layer, LayerstackError, Sellmeier, Stack
+from layerstack_jax import Cauchy, Index, LambertianBackground, LayerstackError, Sellmeier, Stack
 from layerstack_jax._stack import as_spectrum
 from layerstack_jax.io import FreeDeclaration, load_fit_stack
 
@@ -183,7 +183,9 @@ def dispersion(medium: LayerRef, coefficient: str, *, value=None, lower=None, up
 
     Units are the material's: Cauchy A and k dimensionless, B in µm², C in µm⁴; Sellmeier B
     dimensionless, C in µm². The value is a scalar, or ``(term,)`` for Sellmeier B and C;
-    ``per_sample`` adds a leading ``(samples,)`` axis."""
+    ``per_sample`` adds a leading ``(samples,)`` axis. One Sellmeier term alone: a
+    :class:`Parameter` whose path ends with its index, ``Parameter(("layers", "glass", "index",
+    "B", 0), name="B1")`` (module docstring)."""
     kind = "n" if coefficient == "A" else "coefficient"
     lo = lower if lower is not None else (0.0 if coefficient == "k" else None)
     return Parameter(_layer_path(medium, "index", coefficient), kind, name or f"{coefficient}[{medium}]", value, lo,

@@ -58,8 +58,10 @@ Dispersion: wherever ``n`` is accepted it may also be an inline table with exact
 * ``n = { material = "Au", source = "Johnson" }`` — a real material from the
   refractiveindex.info database shipped offline (:func:`~layerstack_jax.material`): ``material``
   is the database's material id (or a ``"shelf/book/page"`` path), ``source`` the page id or
-  words of its title (``"Johnson and Christy"``), needed when the material has several pages;
-  optional ``shelf``. n and k both come from the database (no ``k`` key); wavelengths outside
+  words of its title (``"Johnson and Christy"``), needed when the material has several pages
+  (:func:`~layerstack_jax.material_sources` lists them, with the sample's form — amorphous,
+  crystalline, thin film — where the database says it: amorphous and crystalline Si share
+  ``"Si"``); optional ``shelf``. n and k both come from the database (no ``k`` key); wavelengths outside
   the data's range are an error;
 * ``n = { tauc_lorentz = { Eg = 3.2, A = 150, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }`` — a dispersion
   model by name with its coefficients as the class's fields (units there, eV for energies):

@@ -3,14 +3,16 @@ their bounds, their spectral basis, and how they are packed into one flat vector
 
 A :class:`Parameter` names one numeric leaf of the stack by its *path*, e.g.
 ``("layers", "varnish", "thickness")`` or ``("exit", "reflectance")``; layers may be given by
-position or by name. A path may end with an element index into a 1-D array leaf — one term of
-a Sellmeier ``B`` (``("layers", "glass", "index", "B", 0)``), one oscillator of a list — so that
-single entries are fitted while the others stay as in the stack. Its value is a vector of *coefficients* :math:`c` (one number for a
+position or by name. Its value is a vector of *coefficients* :math:`c` (one number for a
 scalar leaf). A spectral leaf (α(λ), ρg(λ), n(λ)) is :math:`v = B c` on the model wavelength grid,
 with ``B`` of shape ``(wl, m)``: the identity (``basis="free"``: one free value per wavelength),
 a clamped B-spline basis of ``m`` functions (``basis=m``, :func:`bspline_basis`) or any matrix.
 B-splines are non-negative and sum to one, so bounds on the coefficients bound the spectrum:
 :math:`c \ge 0 \Rightarrow \alpha(\lambda) \ge 0`, :math:`0 \le c \le 1 \Rightarrow 0 \le \rho_g(\lambda) \le 1`.
+
+A path may end with an element index into a 1-D array leaf — one term of a Sellmeier ``B``
+(``("layers", "glass", "index", "B", 0)``), one oscillator of a list — so that single entries
+are fitted while the others stay as in the stack (:class:`Layout` sets them with ``.at[].set``).
 
 A parameter is *shared* by all samples of a fit or *per sample* (``per_sample=True``: one
 coefficient vector per sample, e.g. the thicknesses of a calibration series).
@@ -567,17 +569,11 @@ class Layout:
     def __init__(self, params: Sequence[ResolvedParameter], n_samples: int):
         self.params = tuple(params)
         self.n_samples = n_samples
-        # the stack leaves changed: whole leaves, and arrays some of whose elements are free
-        self._leaf_paths: list = []
-        self._elements: list = []  # per leaf path: [(parameter index, element)] or None (whole leaf)
+        # the stack leaves changed, each with [(parameter index, element or None for the whole leaf)]
+        self._targets: dict = {}
         for i, p in enumerate(self.params):
-            lp = p.leaf_path
-            if lp not in self._leaf_paths:
-                self._leaf_paths.append(lp)
-                self._elements.append(None if p.element is None else [(i, p.element)])
-                continue
-            taken = self._elements[self._leaf_paths.index(lp)]
-            if p.element is None or taken is None or p.element in [e for _, e in taken]:
+            taken = self._targets.setdefault(p.leaf_path, [])
+            if any(e is None or p.element is None or e == p.element for _, e in taken):
                 raise LayerstackError(f"free parameter {p.name!r}: the same stack leaf {p.path} is freed twice")
             taken.append((i, p.element))
         sizes = [p.size for p in self.params]
@@ -688,15 +684,16 @@ class Layout:
                 c = c[sample]
             leaves.append(p.leaf(c))
         values = []
-        for lp, elements in zip(self._leaf_paths, self._elements):
-            if elements is None:
-                values.append(leaves[next(i for i, p in enumerate(self.params) if p.leaf_path == lp)])
+        for lp, taken in self._targets.items():
+            if taken[0][1] is None:  # the whole leaf
+                values.append(leaves[taken[0][0]])
                 continue
-            a = jnp.asarray(get_path(stack, lp))  # free elements set, the others as in the stack
-            for i, e in elements:
+            # free elements set, the others as in the stack
+            a = jnp.asarray(get_path(stack, lp), dtype=jnp.result_type(float, *(leaves[i] for i, _ in taken)))
+            for i, e in taken:
                 a = a.at[e].set(leaves[i])
             values.append(a)
-        paths = self._leaf_paths
+        paths = tuple(self._targets)
         return eqx.tree_at(
             lambda st: tuple(get_path(st, path) for path in paths),
             stack,

@@ -303,9 +303,12 @@ class FreeDeclaration(NamedTuple):
     Attributes:
         path: where the value lives in the stack, layers by name: ``("layers", "varnish",
             "thickness")``, ``("layers", "varnish", "alpha")``, ``("layers", name, "index", "n")``,
-            ``("exit", "reflectance")``.
-        kind: ``"thickness"`` (nm), ``"alpha"`` (1/nm), ``"rho_g"`` (fraction), ``"n"`` or
-            ``"coefficient"`` (the extinction coefficient k).
+            ``("exit", "reflectance")``; a model coefficient ``("layers", name, "index", "A")``,
+            one entry of a list ``("layers", name, "index", "B", 0)`` (0-based here, 1-based in
+            the name), a constituent's ``("layers", name, "index", "materials", 0, "A")``.
+        kind: ``"thickness"`` (nm), ``"alpha"`` (1/nm), ``"rho_g"`` (fraction), ``"n"``,
+            ``"coefficient"`` (the extinction coefficient k) or ``"other"`` (model coefficients,
+            effective-medium fractions).
         name: a display name such as ``"thickness_nm[varnish]"``.
         lower, upper: the bounds written in the file, in the parameter's file unit (None: the
             fitting default of that kind).

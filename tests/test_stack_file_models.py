@@ -265,6 +265,7 @@ n = 1.5
         load_stack(tmp_path / "a.toml")
 
 
+@pytest.mark.slow  # ~100 s idle, ~260 s on the shared 2-core machine (compiling the ψ/Δ Jacobian); make test-slow
 def test_free_fraction_and_sellmeier_term_are_fitted(tmp_path):
     """ψ/Δ at 65° and 70° of the true stack (roughness fraction 0.5, Sellmeier B1 = 0.6961663 of
     fused silica, Malitson 1965); the file starts at 0.3 and 0.6: the fit returns the truth."""

@@ -139,6 +139,31 @@ def test_second_run_resumes(fit_command, capsys):
     assert len(err.splitlines()) == 1 and "another job" in err and "--restart" in err
 
 
+def test_scheduler_address_runs_the_same_job_on_a_cluster(fit_command, capsys):
+    """``--scheduler ADDRESS``: the same command on a running Dask cluster (here a scheduler with
+    one in-process worker, reached over TCP like any remote one) writes the maps of the local run."""
+    distributed = pytest.importorskip("distributed")
+    import xarray as xr
+
+    d, argv = fit_command
+    if not (d / "maps.zarr").exists():
+        assert main(argv) == 0
+    local = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
+    out = d / "maps_cluster.zarr"
+    remote_argv = [a if a != str(d / "maps.zarr") else str(out) for a in argv] + ["--no-quicklook"]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  dashboard_address=None) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://")
+        capsys.readouterr()
+        assert cluster.scheduler.transition_counter == 0
+        assert main(remote_argv + ["--scheduler", cluster.scheduler_address]) == 0
+        assert cluster.scheduler.transition_counter > 0  # the regions ran as tasks of that cluster
+    remote = xr.open_zarr(out, consolidated=False).load()
+    assert set(remote.data_vars) == set(local.data_vars)
+    for name in local.data_vars:
+        np.testing.assert_array_equal(remote[name].values, local[name].values, err_msg=name)
+
+
 def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):
     d = cube_files
     base = ["fit-cube", str(d / "model.toml"), str(d / "cube.npy"), "-w", "400:700:10", "-o", str(d / "x.zarr")]

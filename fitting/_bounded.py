@@ -26,6 +26,7 @@ from typing import Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float, Int
 
 __all__ = ["BoundedSolution", "compiled_lbfgsb", "host_lbfgsb", "projected_gradient_norm"]
 
@@ -35,14 +36,15 @@ class BoundedSolution(NamedTuple):
 
     ``x``: the solution ``(..., P)`` (the solver's coordinates); ``value``: the objective at
     ``x``; ``num_steps``: iterations; ``gradient_norm``: the norm of the projected gradient at
-    ``x``; ``converged``: ``gradient_norm <= tol`` with finite ``x`` and ``value``.
+    ``x``; ``converged``: ``gradient_norm <= tol`` with finite ``x`` and ``value``. JAX arrays
+    from the compiled driver, NumPy arrays from the host (scipy) one.
     """
 
-    x: object
-    value: object
-    num_steps: object
-    gradient_norm: object
-    converged: object
+    x: Float[ArrayLike, "*start P"]
+    value: Float[ArrayLike, "*start"]
+    num_steps: Int[ArrayLike, "*start"]
+    gradient_norm: Float[ArrayLike, "*start"]
+    converged: Bool[ArrayLike, "*start"]
 
 
 def _jaxopt():

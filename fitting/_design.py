@@ -33,7 +33,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Real
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
@@ -76,10 +76,10 @@ class SpectralTarget(eqx.Module):
     """
 
     wavelength_nm: Float[Array, " W"] = eqx.field(converter=jnp.asarray)
-    value: object = eqx.field(converter=jnp.asarray)
-    tolerance: object = eqx.field(converter=jnp.asarray, default=0.01)
+    value: Real[Array, "..."] = eqx.field(converter=jnp.asarray)
+    tolerance: Real[Array, "..."] = eqx.field(converter=jnp.asarray, default=0.01)
     quantity: Literal["R", "T", "A"] = eqx.field(static=True, default="R")
-    angle_deg: object = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
+    angle_deg: Float[Array, " A"] = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
     polarization: Literal["natural", "s", "p"] = eqx.field(static=True, default="natural")
     kind: Literal["equal", "below", "above"] = eqx.field(static=True, default="equal")
     weight: float = 1.0
@@ -154,8 +154,8 @@ class ColourTarget(eqx.Module):
     """
 
     colour_space: ls.ColourSpace
-    lab: object = eqx.field(converter=jnp.asarray)
-    angle_deg: object = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
+    lab: Real[Array, "*A 3"] = eqx.field(converter=jnp.asarray)
+    angle_deg: Float[Array, " A"] = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
     tolerance: float = 1.0
     weight: float = 1.0
 

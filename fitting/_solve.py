@@ -43,6 +43,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
+from jaxtyping import Array, Float, Int
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from layerstack_jax import LayerstackError
@@ -98,13 +99,13 @@ class FitOutput(NamedTuple):
     dataset; ``penalty``: penalty residuals; ``jacobian``: ``(M, P)`` of the full residual vector
     w.r.t. ``x / scale``."""
 
-    x: object
-    num_steps: object
-    status: object
-    model: tuple
-    residuals: tuple
-    penalty: object
-    jacobian: object
+    x: Float[Array, "*fit P"]
+    num_steps: Int[Array, "*fit"]
+    status: Int[Array, "*fit"]
+    model: tuple[Float[Array, "..."], ...]
+    residuals: tuple[Float[Array, "..."], ...]
+    penalty: Float[Array, "*fit K"]
+    jacobian: Float[Array, "*fit M P"]
 
 
 # --------------------------------------------------------------------------- Levenberg–Marquardt
@@ -493,9 +494,16 @@ def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -
     solution (clipped into the bounds); NumPy output, one row per fit, with the steps of the
     earlier run added."""
     layout = objective.layout
-    start = np.clip(np.asarray(out.x, float)[rows], layout.lower, layout.upper)
-    new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(
-        jnp.asarray(starting_point(objective, o, start)), jax.tree.map(jnp.asarray, args), objective.optics))
+    start = jnp.asarray(starting_point(objective, o, np.clip(np.asarray(out.x, float)[rows], layout.lower,
+                                                             layout.upper)))
+    args = jax.tree.map(jnp.asarray, args)
+    if len(rows) == 1 and ("fit", o, True, BLOCK) not in compiled_cache(objective):
+        # one fit (``fit`` with one start): the solver it has already compiled, not a batched copy
+        one = compiled_fit(objective, o, batched=False)(start[0], jax.tree.map(lambda a: a[0], args),
+                                                        objective.optics)
+        new = jax.tree.map(lambda a: np.asarray(a)[None], one)
+    else:
+        new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(start, args, objective.optics))
     return new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
 
 

@@ -17,6 +17,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._custom_types import IndexSpectrum, RealLike, RealSpectrumLike, TableColumn, Wavelengths
 from ._materials import Index, Material, Tabulated, as_material
 from ._validate import (LayerstackError, LayerstackWarning, PendingChecks, check, check_nonnegative, check_positive,
                         check_unit_interval, is_concrete, warn_if_implausible)
@@ -48,9 +49,9 @@ class Layer(eqx.Module):
     """
 
     index: Material = eqx.field(converter=as_material)
-    thickness: object
+    thickness: RealLike
     coherent: bool = eqx.field(static=True, default=True)
-    alpha: object = None
+    alpha: Optional[RealSpectrumLike] = None
     name: str = eqx.field(static=True, default="")
 
     def __check_init__(self):
@@ -86,7 +87,7 @@ class LambertianBackground(eqx.Module):
     """
 
     index: Material = eqx.field(converter=as_material)
-    reflectance: object
+    reflectance: RealSpectrumLike
 
     def __check_init__(self):
         if not callable(self.reflectance):
@@ -139,7 +140,7 @@ class TabulatedSpectrum(eqx.Module):
     """
 
     wavelength_nm: tuple = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))
-    values: object
+    values: TableColumn
     name: str = eqx.field(static=True, default="spectrum")
 
     def __call__(self, wavelength_nm):
@@ -159,12 +160,12 @@ class ResolvedStack(NamedTuple):
     ``rho_g``: background reflectance or None for a substrate; ``wavelength``: nm, ``(wl,)``.
     """
 
-    n: tuple
-    d: tuple
-    alpha: tuple
-    coherent: tuple
-    rho_g: Optional[object]
-    wavelength: object
+    n: tuple[IndexSpectrum, ...]
+    d: tuple[RealLike, ...]
+    alpha: tuple[Optional[RealLike], ...]
+    coherent: tuple[bool, ...]
+    rho_g: Optional[RealLike]
+    wavelength: Wavelengths
 
 
 def _check_index(name: str, n, **pending):

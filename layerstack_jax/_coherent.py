@@ -25,7 +25,7 @@ from jax import lax
 
 from ._custom_types import Array, IndexSpectrum, Inexact
 from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux
-from ._numerics import abs2, safe_divide
+from ._numerics import abs2, as_complex, complex_dtype, safe_divide
 
 __all__ = ["PacketIntensities", "packet_amplitudes", "stack_packets"]
 
@@ -120,8 +120,8 @@ def _media(n: Sequence, s):
     the Snell invariant only: Fresnel terms depend on nothing else, so they stay at that (often
     wavelength-free) shape and nothing wavelength-independent is computed per wavelength."""
     shape_n = jnp.broadcast_shapes(*(jnp.shape(x) for x in (*n, s)))
-    n_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape_n) for x in n])
-    return n_arr.astype(jnp.result_type(n_arr.dtype, jnp.complex64))
+    dtype = complex_dtype(*n, jnp.complex64)
+    return jnp.stack([jnp.broadcast_to(jnp.asarray(x).astype(dtype), shape_n) for x in n])
 
 
 def _packet_recursion(r, t, q_films, d: Sequence, wavelength):
@@ -133,7 +133,7 @@ def _packet_recursion(r, t, q_films, d: Sequence, wavelength):
         return r[0], t[0]
     shape = jnp.broadcast_shapes(q_films.shape[1:], *(jnp.shape(x) for x in d), jnp.shape(wavelength))
     d_arr = jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
-    phase = ((2 * jnp.pi / wavelength) * q_films * d_arr)[:, None]  # (F, 1, *B)
+    phase = (as_complex(2 * jnp.pi / wavelength, q_films) * q_films * as_complex(d_arr, q_films))[:, None]  # (F, 1, *B)
     r = jnp.broadcast_to(r, (r.shape[0], 2, *shape))
     t = jnp.broadcast_to(t, (t.shape[0], 2, *shape))
     return _rouard(r, t, phase)

@@ -42,11 +42,12 @@ from __future__ import annotations
 
 from typing import Sequence
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._custom_types import RealLike
 from ._materials import Material, as_material
+from ._numerics import as_complex, complex_from
 from ._validate import LayerstackError, is_concrete
 
 __all__ = ["Bruggeman", "Looyenga", "bruggeman_two_phase", "looyenga"]
@@ -79,7 +80,7 @@ def bruggeman_two_phase(eps_a, eps_b, f_a):
     r"""Two-phase Bruggeman permittivity (module docstring for the root): phase a with volume
     fraction ``f_a``, phase b with 1 − f_a. Complex ε arrays broadcast together; returns ε."""
     f_b = 1.0 - f_a
-    b = (3 * f_a - 1) * eps_a + (3 * f_b - 1) * eps_b
+    b = as_complex(3 * f_a - 1, eps_a) * eps_a + as_complex(3 * f_b - 1, eps_b) * eps_b
     root = jnp.sqrt(b**2 + 8 * eps_a * eps_b)
     plus, minus = (b + root) / 4, (b - root) / 4
     im_p, im_m = jnp.imag(plus), jnp.imag(minus)
@@ -91,7 +92,7 @@ def bruggeman_two_phase(eps_a, eps_b, f_a):
 
 def _cbrt_upper(eps):
     r"""Principal cube root: for Im ε ≥ 0, arg ∈ [0, π/3]."""
-    return jnp.abs(eps) ** (1 / 3) * jnp.exp(1j * jnp.angle(eps) / 3)
+    return as_complex(jnp.abs(eps) ** (1 / 3), eps) * jnp.exp(1j * as_complex(jnp.angle(eps), eps) / 3)
 
 
 def looyenga(eps, f):
@@ -99,12 +100,14 @@ def looyenga(eps, f):
     fractions ``(m, *B')`` (summing to one); returns ``(*B)``. For passive phases every cube
     root has argument in [0, π/3], so their positive combination does too, and the cube lies in
     the upper half plane: passive."""
-    return jnp.sum(f * _cbrt_upper(eps), axis=0) ** 3
+    roots = _cbrt_upper(eps)
+    return jnp.sum(as_complex(f, roots) * roots, axis=0) ** 3
 
 
 def _bruggeman_newton(eps, f):
     """m-phase Bruggeman by Newton's method from the Looyenga value, ε ``(m, *B)``."""
     e = looyenga(eps, f)
+    f = as_complex(f, eps)
     for _ in range(_NEWTON_STEPS):
         g = jnp.sum(f * (eps - e) / (eps + 2 * e), axis=0)
         dg = jnp.sum(f * (-3 * eps) / (eps + 2 * e) ** 2, axis=0)
@@ -114,7 +117,7 @@ def _bruggeman_newton(eps, f):
 
 class _Mixture(Material):
     materials: tuple
-    fractions: object
+    fractions: RealLike
 
     def __init__(self, materials: Sequence, fractions):
         self.materials = tuple(as_material(m) for m in materials)
@@ -133,7 +136,7 @@ class _Mixture(Material):
         eps = self.permittivity(wavelength_nm)
         # the constituents are passive (k >= 0 is enforced), so is the mixture: an imaginary
         # part below zero can only be round-off (~1e-17 at f = 0 or 1), clipped so that k >= 0
-        return jnp.sqrt(jnp.real(eps) + 1j * jnp.maximum(jnp.imag(eps), 0.0))
+        return jnp.sqrt(complex_from(jnp.real(eps), jnp.maximum(jnp.imag(eps), 0.0)))
 
 
 class Bruggeman(_Mixture):

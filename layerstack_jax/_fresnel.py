@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from ._custom_types import Array, ComplexLike, Complex, Float, RealLike
+from ._numerics import as_complex
 
 __all__ = [
     "normal_wavevector",
@@ -63,9 +64,8 @@ def normal_wavevector(n: ComplexLike, s: RealLike) -> Complex[Array, "..."]:
         :math:`\operatorname{Im} q \ge 0` (forward, decaying wave; purely
         imaginary past the critical angle of a lossless medium).
     """
-    n = jnp.asarray(n)
-    n = n.astype(jnp.result_type(n.dtype, jnp.complex64))
-    return _forward_sqrt(n * n - jnp.asarray(s) ** 2)
+    n = as_complex(n, jnp.complex64)
+    return _forward_sqrt(n * n - as_complex(jnp.asarray(s) ** 2, n))
 
 
 def fresnel_amplitudes(n_i: ComplexLike, q_i: ComplexLike, n_f: ComplexLike, q_f: ComplexLike

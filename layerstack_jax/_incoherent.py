@@ -24,7 +24,7 @@ from typing import Sequence
 import jax.numpy as jnp
 
 from ._coherent import PacketIntensities
-from ._numerics import safe_divide, safe_reciprocal
+from ._numerics import as_complex, safe_divide, safe_reciprocal
 
 __all__ = ["slant_path", "beer_rates", "beer_factor", "beer_attenuation_along", "beer_attenuation", "add_layer",
            "add_layers"]
@@ -106,6 +106,8 @@ def add_layer(above: PacketIntensities, below: PacketIntensities, t) -> PacketIn
     All arguments broadcast; the polarization axis is carried along unchanged.
     """
     t2 = t * t
+    if jnp.iscomplexobj(above.R_front):  # s–p correlations: the real attenuation joins them as complex
+        t, t2 = as_complex(t, above.R_front), as_complex(t2, above.R_front)
     den = 1.0 - above.R_back * below.R_front * t2
     # den -> 0 only for a lossless cavity between two perfect mirrors (R = 1 on both sides with
     # t = 1), where no light enters: the numerators vanish as well. (`!= 0` rather than `> 0`

@@ -11,12 +11,14 @@ literature and the refractiveindex.info database; the call itself takes nanometr
 
 from __future__ import annotations
 
-from typing import Callable, Union
+from typing import Callable, Optional, Union
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._custom_types import Coefficients, RealLike, TableColumn
+from ._numerics import complex_from
 from ._validate import LayerstackError, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["Material", "Index", "Cauchy", "Sellmeier", "Tabulated", "as_material"]
@@ -34,7 +36,7 @@ def _complex(n, k):
     angles, segment layout) can be decided at trace time instead of on every call."""
     if is_concrete((n, k)):
         return np.asarray(n) + 1j * np.asarray(k)
-    return jnp.asarray(n) + 1j * jnp.asarray(k)
+    return complex_from(n, k)
 
 
 class Index(Material):
@@ -45,8 +47,8 @@ class Index(Material):
         k: extinction coefficient (>= 0), same shapes.
     """
 
-    n: object
-    k: object = 0.0
+    n: RealLike
+    k: RealLike = 0.0
 
     def __check_init__(self):
         check_finite("Index.n", self.n)
@@ -68,10 +70,10 @@ class Cauchy(Material):
     shape ``(wl,)`` (broadcast with the coefficients' shapes).
     """
 
-    A: object
-    B: object = 0.0
-    C: object = 0.0
-    k: object = 0.0
+    A: RealLike
+    B: RealLike = 0.0
+    C: RealLike = 0.0
+    k: RealLike = 0.0
 
     def __check_init__(self):
         check_nonnegative("Cauchy.k", self.k)
@@ -94,9 +96,9 @@ class Sellmeier(Material):
     shape ``(wl,)``.
     """
 
-    B: object
-    C: object
-    k: object = 0.0
+    B: Coefficients
+    C: Coefficients
+    k: RealLike = 0.0
 
     def __check_init__(self):
         if is_concrete(self.B) and np.shape(self.B) != np.shape(self.C):
@@ -127,8 +129,8 @@ class Tabulated(Material):
     """
 
     wavelength_nm: np.ndarray = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))
-    n: object
-    k: object = None
+    n: TableColumn
+    k: Optional[TableColumn] = None
     name: str = eqx.field(static=True, default="tabulated")
 
     def __check_init__(self):

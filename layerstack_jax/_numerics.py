@@ -8,16 +8,48 @@ are stated per function; elsewhere the value is bit for bit that of the plain op
 
 All functions are elementwise and broadcast their arguments (any shape ``(*B)``); they are
 dimensionless helpers (the result carries the unit of the plain operation).
+
+The dtype helpers (:func:`complex_dtype`, :func:`as_complex`, :func:`complex_from`) write out the
+real → complex promotions the kernels intend, so that they also run under
+``jax_numpy_dtype_promotion = "strict"`` (the tests' setting): each gives exactly the dtype, and
+the values, that JAX's standard promotion gives implicitly.
 """
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
-from ._custom_types import Array, ArrayLike, ComplexLike, Float, Inexact, RealLike
+from ._custom_types import Array, ArrayLike, Complex, ComplexLike, Float, Inexact, RealLike
 
-__all__ = ["abs2", "safe_abs", "safe_atan2", "safe_divide", "safe_divide_nonzero", "safe_reciprocal", "safe_sqrt",
-           "sin_from_cos"]
+__all__ = ["abs2", "as_complex", "complex_dtype", "complex_from", "safe_abs", "safe_atan2", "safe_divide",
+           "safe_divide_nonzero", "safe_reciprocal", "safe_sqrt", "sin_from_cos"]
+
+
+def complex_dtype(*values) -> jnp.dtype:
+    """The dtype of ``values`` (arrays, Python numbers or dtypes) combined with a Python complex
+    number, as in ``x + 1j * y``: complex64 from float32, complex128 from float64, the default
+    complex dtype from integers and Python scalars alone (complex128 with x64 on). Pass
+    ``jnp.complex64`` among the values for "at least complex64, else the values' precision".
+    Computed under standard promotion on purpose: the real → complex step is the intended one."""
+    with jax.numpy_dtype_promotion("standard"):
+        return jnp.result_type(*values, 1j)
+
+
+def as_complex(x: ComplexLike, *others: ComplexLike) -> Complex[Array, "..."]:
+    """``x`` as a complex array of :func:`complex_dtype` ``(x, *others)`` (the values unchanged:
+    a real x gets a zero imaginary part); ``others`` only take part in choosing the precision."""
+    return jnp.asarray(x).astype(complex_dtype(x, *others))
+
+
+def complex_from(re: RealLike, im: RealLike) -> Complex[Array, "..."]:
+    r""":math:`\mathrm{re} + i\,\mathrm{im}` from two real arrays (broadcast together), of
+    :func:`complex_dtype` ``(re, im)``: the value ``re + 1j * im`` has for finite inputs, without
+    the Python-complex promotion (and without ``0 * inf`` in the real part for an infinite im)."""
+    dtype = complex_dtype(re, im)
+    real = dtype.type(0).real.dtype
+    re, im = jnp.broadcast_arrays(jnp.asarray(re).astype(real), jnp.asarray(im).astype(real))
+    return jax.lax.complex(re, im)
 
 
 def abs2(z: ComplexLike) -> Float[Array, "..."]:

@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import warnings
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._custom_types import Coefficients, RealLike
 from ._materials import Material
+from ._numerics import as_complex, complex_from
 from ._validate import LayerstackError, LayerstackWarning, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["HC_EV_NM", "photon_energy", "Lorentz", "Drude", "TaucLorentz", "CodyLorentz", "CauchyUrbach"]
@@ -59,7 +60,7 @@ def _index_from_permittivity(eps1, eps2):
     r""":math:`\sqrt{\varepsilon_1 + i\varepsilon_2}`, principal root (k ≥ 0 for ε₂ ≥ 0).
     ``+ 0.0`` turns a −0.0 imaginary part into +0.0 so that a lossless negative ε₁ gives
     +ik, not −ik."""
-    return jnp.sqrt(eps1 + 1j * (eps2 + 0.0))
+    return jnp.sqrt(complex_from(eps1, eps2 + 0.0))
 
 
 def _safe_xlogx2(x):
@@ -90,10 +91,10 @@ class Lorentz(Material):
     Called with wavelengths in nm ``(wl,)``, returns n + ik ``(wl,)``.
     """
 
-    A: object
-    E0: object
-    gamma: object
-    eps_inf: object = 1.0
+    A: Coefficients
+    E0: Coefficients
+    gamma: Coefficients
+    eps_inf: RealLike = 1.0
 
     def __check_init__(self):
         _check_oscillators("Lorentz", A=self.A, E0=self.E0, gamma=self.gamma)
@@ -102,8 +103,9 @@ class Lorentz(Material):
     def permittivity(self, wavelength_nm):
         """Complex ε on the grid (nm) ``(wl,)``."""
         E = photon_energy(wavelength_nm)
-        terms = _osc(self.A) / (_osc(self.E0) ** 2 - E**2 - 1j * _osc(self.gamma) * E)
-        return self.eps_inf + jnp.sum(terms, axis=0)
+        denominator = complex_from(_osc(self.E0) ** 2 - E**2, 0.0 - _osc(self.gamma) * E)
+        terms = as_complex(_osc(self.A), denominator) / denominator
+        return as_complex(self.eps_inf, terms) + jnp.sum(terms, axis=0)
 
     def __call__(self, wavelength_nm):
         eps = self.permittivity(wavelength_nm)
@@ -124,9 +126,9 @@ class Drude(Material):
     Called with wavelengths in nm ``(wl,)``, returns n + ik ``(wl,)``.
     """
 
-    Ep: object
-    gamma: object
-    eps_inf: object = 1.0
+    Ep: RealLike
+    gamma: RealLike
+    eps_inf: RealLike = 1.0
 
     def __check_init__(self):
         check_finite("Drude.Ep", self.Ep)
@@ -135,7 +137,8 @@ class Drude(Material):
     def permittivity(self, wavelength_nm):
         """Complex ε on the grid (nm) ``(wl,)``."""
         E = photon_energy(wavelength_nm)
-        return self.eps_inf - jnp.asarray(self.Ep) ** 2 / (E**2 + 1j * jnp.asarray(self.gamma) * E)
+        denominator = complex_from(E**2, jnp.asarray(self.gamma) * E)
+        return as_complex(self.eps_inf, denominator) - as_complex(jnp.asarray(self.Ep) ** 2, denominator) / denominator
 
     def __call__(self, wavelength_nm):
         eps = self.permittivity(wavelength_nm)
@@ -201,11 +204,11 @@ class TaucLorentz(Material):
     Called with wavelengths in nm ``(wl,)``, returns n + ik ``(wl,)``.
     """
 
-    Eg: object
-    A: object
-    E0: object
-    C: object
-    eps_inf: object = 1.0
+    Eg: RealLike
+    A: Coefficients
+    E0: Coefficients
+    C: Coefficients
+    eps_inf: RealLike = 1.0
 
     def __check_init__(self):
         _check_oscillators("TaucLorentz", A=self.A, E0=self.E0, C=self.C)
@@ -222,7 +225,8 @@ class TaucLorentz(Material):
         """Complex ε on the grid (nm) ``(wl,)``."""
         E = photon_energy(wavelength_nm)
         args = (E, self.Eg, _osc(self.A), _osc(self.E0), _osc(self.C))
-        return self.eps_inf + jnp.sum(tauc_lorentz_eps1(*args) + 1j * tauc_lorentz_eps2(*args), axis=0)
+        oscillators = jnp.sum(complex_from(tauc_lorentz_eps1(*args), tauc_lorentz_eps2(*args)), axis=0)
+        return as_complex(self.eps_inf, oscillators) + oscillators
 
     def __call__(self, wavelength_nm):
         eps = self.permittivity(wavelength_nm)
@@ -278,14 +282,14 @@ class CodyLorentz(Material):
     Called with wavelengths in nm ``(wl,)``, returns n + ik ``(wl,)``.
     """
 
-    Eg: object
-    A: object
-    E0: object
-    gamma: object
-    Ep: object
-    Et: object
-    Eu: object
-    eps_inf: object = 1.0
+    Eg: RealLike
+    A: RealLike
+    E0: RealLike
+    gamma: RealLike
+    Ep: RealLike
+    Et: RealLike
+    Eu: RealLike
+    eps_inf: RealLike = 1.0
 
     def __check_init__(self):
         for f in ("Eg", "A", "E0", "gamma", "Ep", "Et", "Eu"):
@@ -338,7 +342,7 @@ class CodyLorentz(Material):
     def permittivity(self, wavelength_nm):
         """Complex ε on the grid (nm) ``(wl,)``."""
         E = jnp.atleast_1d(photon_energy(wavelength_nm))
-        eps = self.eps_inf + self._eps1(E) + 1j * self._eps2(E)
+        eps = complex_from(self.eps_inf + self._eps1(E), self._eps2(E))
         return jnp.reshape(eps, jnp.shape(jnp.asarray(wavelength_nm)))
 
     def __call__(self, wavelength_nm):
@@ -369,12 +373,12 @@ class CauchyUrbach(Material):
     :math:`B_E = B/(hc)^2`, :math:`C_E = C/(hc)^4`, hc in eV µm.)
     """
 
-    A: object
-    B: object = 0.0
-    C: object = 0.0
-    k0: object = 0.0
-    Eb: object = 3.0
-    Eu: object = 0.5
+    A: RealLike
+    B: RealLike = 0.0
+    C: RealLike = 0.0
+    k0: RealLike = 0.0
+    Eb: RealLike = 3.0
+    Eu: RealLike = 0.5
 
     def __check_init__(self):
         check_nonnegative("CauchyUrbach.k0", self.k0)
@@ -385,4 +389,4 @@ class CauchyUrbach(Material):
         lam2 = (jnp.asarray(wavelength_nm) * 1e-3) ** 2
         n = self.A + self.B / lam2 + self.C / lam2**2
         k = self.k0 * jnp.exp((photon_energy(wavelength_nm) - self.Eb) / self.Eu)
-        return n + 1j * k
+        return complex_from(n, k)

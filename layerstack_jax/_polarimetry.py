@@ -66,7 +66,7 @@ from ._custom_types import Array, Float, RealLike, Spectrum
 from ._fresnel import exit_medium_ratio, normal_wavevector, power_flux
 from ._illumination import diffuse_resolved, snell_invariant
 from ._incoherent import add_layers, beer_attenuation
-from ._numerics import safe_divide, safe_sqrt
+from ._numerics import as_complex, safe_divide, safe_sqrt
 from ._quadrature import DEFAULT_NODES
 from ._response import stack_intensities, thick_media
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
@@ -204,6 +204,7 @@ def diffuse_mueller(
 
 def _triple(a_s, a_p, w_s=1.0, w_p=1.0):
     w_x = jnp.sqrt(w_s * w_p)
+    w_s, w_p, w_x = (as_complex(w, a_s, a_p) for w in (w_s, w_p, w_x))
     return jnp.stack([a_s * jnp.conj(a_s) * w_s, a_p * jnp.conj(a_p) * w_p, a_p * jnp.conj(a_s) * w_x])
 
 

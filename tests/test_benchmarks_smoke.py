@@ -110,3 +110,20 @@ def test_design_case_runs_on_a_tiny_grid(capsys):
 
     assert design_case.main(["--repeats", "1", "--wavelengths", "8", "--angles", "2"]) == 0
     assert "gradient / value" in capsys.readouterr().out
+
+
+def test_ellipsometry_fit_runner_tiny():
+    """E1 on 16 wavelengths: layerstack's ψ, Δ at the truth equal pyElli's (the data's source) to
+    ≤ 1e-9°, both codes fit the same values, the truth is recovered, and the report renders."""
+    pytest.importorskip("elli")
+    from benchmarks import ellipsometry_fit
+
+    res = ellipsometry_fit.run(n_wavelengths=16, repeats=1, starts=1)  # starts > 1: one more compile (~1 min loaded)
+    assert res["model_check_deg"] <= 1e-9
+    assert res["all_converged"]
+    assert res["max_disagreement_in_stderr"] <= 1e-3
+    assert res["max_error_in_stderr"] <= 5.0
+    machine = {"timestamp": "t", "git": "g", "cpu_model": "cpu", "cpu_count": 2, "mem_total_gib": 1.0,
+               "versions": {"jax": "x", "scipy": "y"}, "pyelli": "z"}
+    text = "\n".join(ellipsometry_fit.markdown(res, [res], machine, "up 1 day"))
+    assert "| compile (first fit − median further fit) |" in text and "pyElli" in text

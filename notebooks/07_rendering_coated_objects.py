@@ -268,7 +268,9 @@ if HAVE_MITSUBA:
                 m, p90, Y = stats8[(row, s)][k]
                 print(f"{row:8s}  {name:14s}  {s:5.0f}      {m:6.3f}      {p90:6.3f}         {Y * EXPOSURE:6.3f}")
     # the coating colours the aluminium sphere, at every roughness: more saturated than bare aluminium
-    assert all(stats8[("(d)–(f)", s)]["coated"][0] > stats8[("(d)–(f)", s)]["bare"][0] for s in SIGMAS)
+    # (full run only: at QUICK's 4 spp the tiles' colour noise, ~0.1, exceeds the smooth pair's 0.016)
+    if not QUICK:
+        assert all(stats8[("(d)–(f)", s)]["coated"][0] > stats8[("(d)–(f)", s)]["bare"][0] for s in SIGMAS)
 
 # %% [markdown]
 # **The claim of §6, measured.** The paper says that the iridescent colours on the rough

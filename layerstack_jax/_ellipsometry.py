@@ -60,13 +60,67 @@ opposite Δ convention fits far better mirrored, which ``fitting`` reports. The 
 Mueller matrix of the reflection is
 :math:`[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`, as measured
 (:mod:`layerstack_jax._polarimetry`).
+
+Instrument non-idealities: offset, bandwidth, thickness non-uniformity, depolarization
+-------------------------------------------------------------------------------------
+:class:`Ellipsometric` also models the imperfections vendor software fits (all default to the
+ideal instrument, whose reading is bit-identical to :func:`ellipsometry`):
+
+* ``angle_offset_deg`` :math:`\delta\theta` (degrees): every angle read as
+  :math:`\theta_0 + \delta\theta`.
+* ``bandwidth_nm`` *b* (nm): the monochromator's Gaussian instrument function of FWHM *b*,
+  :math:`\sigma_\lambda = b / (2\sqrt{2\ln 2})`.
+* ``thickness_spread`` *s* (dimensionless): the thickness of layer ``nonuniform_layer`` is
+  Gaussian over the light spot, :math:`d \sim \mathcal N(d_0, (s d_0)^2)`.
+
+Light of different wavelengths or from different points of the spot adds incoherently, so the
+instrument reads the *average* of the normalized Mueller elements (never of ρ):
+
+.. math::
+    \bar N = \langle N \rangle,\quad \bar C = \langle C \rangle,\quad \bar S = \langle S \rangle,
+    \qquad N = \frac{|r_s|^2 - |r_p|^2}{|r_s|^2 + |r_p|^2},\;
+    C + iS = \frac{2\, r_s \bar r_p}{|r_s|^2 + |r_p|^2}
+
+(the same N = cos 2ψ, C = sin 2ψ cos Δ, S = sin 2ψ sin Δ as above, written in the amplitudes),
+the mean over :math:`\lambda' \sim \mathcal N(\lambda, \sigma_\lambda^2)` and
+:math:`d \sim \mathcal N(d_0, (s d_0)^2)` taken by a fixed Gauss–Hermite rule in each
+variable, :math:`\langle f \rangle = \sum_k w_k f(\mu + \sigma x_k)` with
+:math:`x_k = \sqrt 2\,t_k`, :math:`w_k = \omega_k/\sqrt\pi` (:math:`t_k, \omega_k` of
+``numpy.polynomial.hermite.hermgauss``; exact for polynomials of degree ≤ 2K − 1), vectorised over
+the nodes. K = ``Ellipsometric.average_nodes`` (static, default 21 per variable). The Airy
+response of a film is far from a low-degree polynomial in its thickness (multiple-beam
+harmonics): for 100 nm of n = 1.46 on n = 3.88 + 0.02i at 65–75°, 400–633 nm, the error of the
+averaged N, C, S against dense quadrature is 4e-7 with 9 nodes, 6e-9 with 13 and < 2e-10 with
+17 at a 5 % spread, but 3.5e-4 (9), 8e-6 (17) and 4e-7 (25) at 10 %; the default 21 gives 8e-12
+(5 %) and 1.6e-6 (10 %) — raise ``average_nodes`` for wide spreads of thick films. The spread
+is limited to :math:`s\,x_K < 1` (every node thickness positive: s < 0.127 with 21 nodes).
+The averaged normalized Mueller matrix keeps the form
+:math:`[[1, -\bar N, 0, 0], [-\bar N, 1, 0, 0], [0, 0, \bar C, \bar S], [0, 0, -\bar S, \bar C]]`
+and is depolarizing: :math:`P = \sqrt{\bar N^2 + \bar C^2 + \bar S^2} \le 1` (the norm of a mean of unit vectors;
+P = 1 for the ideal instrument, since :math:`N^2 + C^2 + S^2 = 1`). Reported from
+:math:`\bar N, \bar C, \bar S`:
+
+.. math::
+    \psi = \tfrac12 \operatorname{atan2}\bigl(\sqrt{\bar C^2 + \bar S^2},\, \bar N\bigr),
+    \qquad \Delta = \operatorname{atan2}(\bar S, \bar C),
+    \qquad \text{depolarization} = 1 - P \in [0, 1]
+
+(the ψ, Δ of the unit vector :math:`(\bar N, \bar C, \bar S)/P` — equal to the ideal ψ, Δ when
+P = 1; depolarization as a fraction, not in %). The ``'N'``, ``'C'``, ``'S'`` quantities
+read :math:`\bar N, \bar C, \bar S` themselves; ``'rho_re'``, ``'rho_im'`` read
+:math:`\tan\psi\, e^{-i\Delta}` of the reported ψ, Δ. All three parameters are pytree
+leaves of the geometry: differentiable and fittable (``fitting.instrument``).
 """
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple
+import functools
+import math
+from typing import ClassVar, NamedTuple, Optional, Union
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 import equinox as eqx
 
@@ -74,14 +128,21 @@ from ._coherent import packet_amplitudes
 from ._geometry import Geometry
 from ._custom_types import Array, Complex, Float, RealLike
 from ._illumination import snell_invariant
-from ._numerics import safe_abs, safe_atan2
+from ._numerics import abs2, safe_abs, safe_atan2, safe_divide, safe_sqrt
 from ._stack import ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, check_angle_deg, is_concrete
+from ._validate import LayerstackError, check_angle_deg, check_finite, check_nonnegative, is_concrete
 
-__all__ = ["Ellipsometry", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
+__all__ = ["Ellipsometry", "EllipsometerReading", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
 
 #: the quantities an :class:`Ellipsometric` geometry reads (one per dataset)
-QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im")
+QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im", "depolarization")
+
+#: Gauss–Hermite nodes per averaged variable (wavelength, thickness): a static number (the
+#: default of ``Ellipsometric.average_nodes``; accuracy in the module docstring)
+GAUSS_NODES = 21
+
+#: σ of a Gaussian per unit FWHM, :math:`1/(2\sqrt{2\ln 2})`
+FWHM_TO_SIGMA = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))
 
 
 class Ellipsometry(NamedTuple):
@@ -205,6 +266,124 @@ def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsomet
     return Ellipsometry(jnp.rad2deg(psi), jnp.rad2deg(delta), r_p / r_s)
 
 
+
+class EllipsometerReading(NamedTuple):
+    r"""What a (possibly non-ideal) ellipsometer reads, every field shaped ``(*angle, wl)``.
+
+    Attributes:
+        psi_deg, delta_deg: ψ in [0, 90] and Δ in (−180, 180] degrees, from :math:`\bar N,
+            \bar C, \bar S` (module docstring, "Instrument non-idealities").
+        N, C, S: the (averaged) normalized Mueller elements, dimensionless.
+        depolarization: :math:`1 - \sqrt{N^2 + C^2 + S^2}` in [0, 1] (0 for the ideal instrument).
+    """
+
+    psi_deg: Float[Array, "*angle wl"]
+    delta_deg: Float[Array, "*angle wl"]
+    N: Float[Array, "*angle wl"]
+    C: Float[Array, "*angle wl"]
+    S: Float[Array, "*angle wl"]
+    depolarization: Float[Array, "*angle wl"]
+
+
+@functools.lru_cache(maxsize=None)
+def standard_normal_rule(nodes: int = GAUSS_NODES) -> tuple[np.ndarray, np.ndarray]:
+    r"""Gauss–Hermite rule for the mean over a standard normal variable X (float64 numpy).
+
+    Returns ``(x, w)``, each ``(nodes,)``, with :math:`E[f(X)] \approx \sum_k w_k f(x_k)`:
+    :math:`x_k = \sqrt 2\, t_k`, :math:`w_k = \omega_k / \sqrt\pi` from the physicists' rule
+    :math:`\int e^{-t^2} g(t)\,dt \approx \sum_k \omega_k g(t_k)` (exact for polynomials f of
+    degree ≤ 2·nodes − 1); the weights sum to 1.
+    """
+    t, w = np.polynomial.hermite.hermgauss(nodes)
+    return math.sqrt(2.0) * t, w / math.sqrt(math.pi)
+
+
+def mueller_ncs(r_s, r_p):
+    r"""Normalized Mueller elements :math:`(N, C, S)` of a non-depolarizing reflection.
+
+    :math:`N = (|r_s|^2 - |r_p|^2)/(|r_s|^2 + |r_p|^2)` and
+    :math:`C + iS = 2 r_s \bar r_p / (|r_s|^2 + |r_p|^2)` — the same cos 2ψ, sin 2ψ cos Δ,
+    sin 2ψ sin Δ as :class:`Ellipsometry` (Δ = arg(r_s r̄_p), module docstring), written without
+    angles so that they are smooth to average. ``r_s``, ``r_p``: complex, broadcast to ``(*B)``;
+    returns three real ``(*B)`` arrays (0 where both amplitudes vanish).
+    """
+    total = abs2(r_s) + abs2(r_p)
+    cross = 2.0 * r_s * jnp.conj(r_p)
+    return (safe_divide(abs2(r_s) - abs2(r_p), total), safe_divide(jnp.real(cross), total),
+            safe_divide(jnp.imag(cross), total))
+
+
+def reading_from_ncs(N, C, S) -> EllipsometerReading:
+    r"""ψ, Δ and depolarization reported from (averaged) :math:`N, C, S` (module docstring):
+    :math:`\psi = \tfrac12\operatorname{atan2}(\sqrt{C^2+S^2}, N)`,
+    :math:`\Delta = \operatorname{atan2}(S, C)` in (−180°, 180°],
+    depolarization :math:`1 - \sqrt{N^2+C^2+S^2}` clipped to [0, 1]. Any shapes that broadcast."""
+    psi = 0.5 * safe_atan2(safe_sqrt(C * C + S * S), N)
+    delta = safe_atan2(S, C)
+    delta = jnp.where(delta <= -jnp.pi, jnp.pi, delta)  # a real negative C/P gives +180°, as psi_delta
+    depolarization = jnp.clip(1.0 - safe_sqrt(N * N + C * C + S * S), 0.0, 1.0)
+    return EllipsometerReading(jnp.rad2deg(psi), jnp.rad2deg(delta), N, C, S, depolarization)
+
+
+def _layer_index(stack: Stack, layer: Union[int, str, None]) -> int:
+    """Position of the non-uniform layer given by position or name (``Ellipsometric.nonuniform_layer``)."""
+    names = [layer_.name for layer_ in stack.layers]
+    if isinstance(layer, str):
+        hits = [i for i, n in enumerate(names) if n == layer]
+        if len(hits) != 1:
+            raise LayerstackError(f"Ellipsometric.nonuniform_layer: {len(hits)} layers are named {layer!r} "
+                                  f"(layers: {names}); give one name or the position")
+        return hits[0]
+    if isinstance(layer, int) and not isinstance(layer, bool) and -len(names) <= layer < len(names):
+        return layer % len(names)
+    raise LayerstackError(f"Ellipsometric.nonuniform_layer: give the layer (position or name) whose thickness "
+                          f"spreads; the stack has {len(names)} layer(s) {names}, got {layer!r}")
+
+
+def averaged_ncs(stack: Stack, wavelength_nm, angle_deg, *, bandwidth_nm=0.0, thickness_spread=0.0,
+                 nonuniform_layer: Union[int, str, None] = None, average_wavelength: bool = True,
+                 average_thickness: bool = True, nodes: int = GAUSS_NODES):
+    r"""Incoherent averages :math:`\bar N, \bar C, \bar S` over the instrument's Gaussian
+    wavelength band and the Gaussian thickness of one layer (module docstring).
+
+    Args:
+        stack: coherent stack; wavelength_nm: ``(wl,)`` nm; angle_deg: ``(*angle)`` degrees.
+        bandwidth_nm: FWHM b (nm) of the instrument function: :math:`\lambda' = \lambda +
+            \sigma_\lambda x_j`, :math:`\sigma_\lambda = b/(2\sqrt{2\ln 2})`.
+        thickness_spread: relative σ s of the thickness of ``nonuniform_layer``:
+            :math:`d_i = d_0 (1 + s x_i)`.
+        average_wavelength, average_thickness: static switches; False drops that variable's
+            nodes (its mean is then the value at the centre).
+        nodes: Gauss–Hermite nodes per averaged variable (static).
+
+    Returns ``(N, C, S)``, each ``(*angle, wl)``: :math:`\sum_{i,j} w_i w_j\, N(\lambda +
+    \sigma_\lambda x_j;\, d_i)` etc., the nodes of :func:`standard_normal_rule` evaluated in one
+    vectorised call (the thickness nodes by ``jax.vmap``).
+    """
+    x, w = standard_normal_rule(nodes)
+    wl = jnp.asarray(wavelength_nm)
+    one = (np.zeros(1), np.ones(1))
+    xl, wlw = (x, w) if average_wavelength else one
+    xd, wdw = (x, w) if average_thickness else one
+    nodes_wl = (wl[None, :] + FWHM_TO_SIGMA * bandwidth_nm * jnp.asarray(xl)[:, None]).reshape(-1)  # (Kl*wl,)
+
+    def ncs(st):
+        r_s, r_p = reflection_amplitudes(st, nodes_wl, angle_deg)  # (*angle, Kl*wl)
+        values = jnp.stack(mueller_ncs(r_s, r_p))  # (3, *angle, Kl*wl)
+        values = values.reshape(values.shape[:-1] + (xl.size, wl.shape[-1]))
+        return jnp.tensordot(values, jnp.asarray(wlw), axes=([-2], [0]))  # (3, *angle, wl)
+
+    if average_thickness:
+        i = _layer_index(stack, nonuniform_layer)
+        d0 = stack.layers[i].thickness
+        thicknesses = d0 * (1.0 + thickness_spread * jnp.asarray(xd))
+        at = lambda d: ncs(eqx.tree_at(lambda s: s.layers[i].thickness, stack, d))  # noqa: E731
+        values = jnp.tensordot(jnp.asarray(wdw), jax.vmap(at)(thicknesses), axes=([0], [0]))
+    else:
+        values = ncs(stack)
+    return values[0], values[1], values[2]
+
+
 class Ellipsometric(Geometry):
     """An ellipsometer's reading at ``angle_deg`` (degrees), as a measurement geometry: lets
     ψ/Δ spectra be fitted (``fitting.Dataset(Ellipsometric(70, "psi"), data)``).
@@ -216,14 +395,32 @@ class Ellipsometric(Geometry):
       reported in [0°, 360°);
     * ``'N'`` = cos 2ψ, ``'C'`` = sin 2ψ cos Δ, ``'S'`` = sin 2ψ sin Δ (dimensionless, wrap-free);
     * ``'rho_re'``, ``'rho_im'``: Re and Im of ρ = r_p/r_s = tan ψ e^{−iΔ} (dimensionless,
-      wrap-free; the convention of :attr:`Ellipsometry.rho` and ``Measurement.rho()``).
+      wrap-free; the convention of :attr:`Ellipsometry.rho` and ``Measurement.rho()``);
+    * ``'depolarization'``: :math:`1 - \sqrt{N^2 + C^2 + S^2}` in [0, 1] (0 for an ideal one).
 
     ``angle_deg``: scalar or array ``(*angle)`` of incidence angles in degrees; :meth:`measure`
     returns ``(*angle, wl)``.
+
+    Non-idealities (module docstring, "Instrument non-idealities"; pytree leaves: differentiable,
+    and fittable with ``fitting.instrument``; the defaults are the ideal instrument, read
+    exactly as :func:`ellipsometry`):
+
+    * ``angle_offset_deg``: added to every angle (degrees);
+    * ``bandwidth_nm``: FWHM of the Gaussian instrument function in wavelength (nm, ≥ 0);
+    * ``thickness_spread``: relative Gaussian σ of the thickness of layer ``nonuniform_layer``
+      (position or name; dimensionless, ≥ 0, below :math:`1/x_K` — 0.127 with 21 nodes — so
+      that every Gauss–Hermite node thickness stays positive);
+    * ``average_nodes`` (static): Gauss–Hermite nodes per averaged variable (default 21;
+      accuracy in the module docstring).
     """
 
     angle_deg: object = 70.0
     quantity: str = eqx.field(static=True, default="psi")
+    angle_offset_deg: object = 0.0
+    bandwidth_nm: object = 0.0
+    thickness_spread: object = 0.0
+    nonuniform_layer: Optional[Union[int, str]] = eqx.field(static=True, default=None)
+    average_nodes: int = eqx.field(static=True, default=GAUSS_NODES)
 
     def __check_init__(self):
         if self.quantity not in QUANTITIES:
@@ -231,21 +428,63 @@ class Ellipsometric(Geometry):
                 f"Ellipsometric.quantity must be one of {', '.join(map(repr, QUANTITIES))}, got {self.quantity!r}"
             )
         check_angle_deg("Ellipsometric.angle_deg", self.angle_deg)
+        check_finite("Ellipsometric.angle_offset_deg (degrees)", self.angle_offset_deg)
+        check_nonnegative("Ellipsometric.bandwidth_nm (FWHM, nm)", self.bandwidth_nm)
+        check_nonnegative("Ellipsometric.thickness_spread (relative sigma)", self.thickness_spread)
+        if not (isinstance(self.average_nodes, int) and self.average_nodes >= 1):
+            raise LayerstackError(f"Ellipsometric.average_nodes must be an int >= 1, got {self.average_nodes!r}")
+        if is_concrete(self.thickness_spread):
+            spread = float(np.max(np.asarray(self.thickness_spread)))
+            top = float(np.max(standard_normal_rule(self.average_nodes)[0]))
+            if spread * top >= 1.0:
+                raise LayerstackError(f"Ellipsometric.thickness_spread = {spread:g}: must stay below {1.0 / top:.4g} "
+                                      f"with average_nodes = {self.average_nodes} (a node thickness would be <= 0)")
+            if spread > 0 and self.nonuniform_layer is None:
+                raise LayerstackError("Ellipsometric.thickness_spread > 0 needs nonuniform_layer (the layer, by "
+                                      "position or name, whose thickness spreads)")
 
-    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im"
+    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im|depolarization"
     signed: ClassVar[bool] = True  # Δ, C, S, Re ρ, Im ρ may be negative
     reads_diffuse_light: ClassVar[bool] = False
     reading_is_fraction: ClassVar[bool] = False
 
+    def _is_zero(self, name: str) -> bool:
+        """True when non-ideality ``name`` is concretely 0 (then it is left out, not averaged)."""
+        v = getattr(self, name)
+        return is_concrete(v) and not np.any(np.asarray(v))
+
+    @property
+    def ideal(self) -> bool:
+        """True when every non-ideality is concretely 0: the reading is :func:`ellipsometry`'s."""
+        return all(self._is_zero(n) for n in ("angle_offset_deg", "bandwidth_nm", "thickness_spread"))
+
+    def reading(self, stack: Stack, wavelength_nm) -> EllipsometerReading:
+        """ψ, Δ, N, C, S and depolarization read for ``stack`` on ``wavelength_nm`` (nm), every
+        field ``(*angle, wl)``: the ideal :func:`ellipsometry` or, with a bandwidth or a thickness
+        spread, the averages of :func:`averaged_ncs` reported by :func:`reading_from_ncs`."""
+        angle = self.angle_deg if self._is_zero("angle_offset_deg") else (
+            jnp.asarray(self.angle_deg) + self.angle_offset_deg)
+        band, spread = not self._is_zero("bandwidth_nm"), not self._is_zero("thickness_spread")
+        if not (band or spread):
+            e = ellipsometry(stack, wavelength_nm, angle)
+            return EllipsometerReading(e.psi_deg, e.delta_deg, e.N, e.C, e.S, jnp.zeros_like(e.psi_deg))
+        N, C, S = averaged_ncs(stack, wavelength_nm, angle, bandwidth_nm=self.bandwidth_nm,
+                               thickness_spread=self.thickness_spread, nonuniform_layer=self.nonuniform_layer,
+                               average_wavelength=band, average_thickness=spread, nodes=self.average_nodes)
+        return reading_from_ncs(N, C, S)
+
     def measure(self, stack: Stack, wavelength_nm, *, nodes: int = 0, optics=None) -> Float[Array, "*angle wl"]:
         """The quantity read for ``stack`` on ``wavelength_nm`` (nm); ``nodes`` and ``optics``
         are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
-        e = ellipsometry(stack, wavelength_nm, self.angle_deg)
-        if self.quantity == "rho_re":
-            return jnp.real(e.rho)
-        if self.quantity == "rho_im":
-            return jnp.imag(e.rho)
-        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
+        if self.ideal and self.quantity in ("rho_re", "rho_im"):
+            rho = ellipsometry(stack, wavelength_nm, self.angle_deg).rho
+            return jnp.real(rho) if self.quantity == "rho_re" else jnp.imag(rho)
+        e = self.reading(stack, wavelength_nm)
+        if self.quantity in ("rho_re", "rho_im"):
+            t, d = jnp.tan(jnp.deg2rad(e.psi_deg)), jnp.deg2rad(e.delta_deg)
+            return t * jnp.cos(d) if self.quantity == "rho_re" else -t * jnp.sin(d)
+        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S,
+                "depolarization": e.depolarization}[self.quantity]
 
     def residual(self, model, data):
         """Model − data; for ``'delta'`` wrapped into (−180°, 180°] by :func:`wrap_degrees`
@@ -277,11 +516,12 @@ class Ellipsometric(Geometry):
     def quantity_label(self) -> str:
         return {"psi": "psi (degrees)", "delta": "Delta (degrees)", "N": "N = cos 2psi", "C": "C = sin 2psi cos Delta",
                 "S": "S = sin 2psi sin Delta", "rho_re": "Re rho = tan psi cos Delta",
-                "rho_im": "Im rho = -tan psi sin Delta"}[self.quantity]
+                "rho_im": "Im rho = -tan psi sin Delta",
+                "depolarization": "depolarization = 1 - sqrt(N^2 + C^2 + S^2)"}[self.quantity]
 
     @classmethod
     def parse(cls, text: str):
-        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C, S, rho_re or rho_im; default
+        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C, S, rho_re, rho_im or depolarization; default
         psi; case-insensitive)."""
         if not text.startswith("ellipsometry"):
             return None
@@ -290,5 +530,5 @@ class Ellipsometric(Geometry):
             raise ValueError(text)
         q = parts[2] if len(parts) > 2 else "psi"
         q = q.lower()
-        q = q if q in ("psi", "delta", "rho_re", "rho_im") else q.upper()
+        q = q if q in ("psi", "delta", "rho_re", "rho_im", "depolarization") else q.upper()
         return cls(float(parts[1]), q)

@@ -10,7 +10,7 @@ working directory and the Agg backend; a cell that raises stops the run
 (``nbclient.exceptions.CellExecutionError``, with the cell's traceback). :func:`to_markdown` writes
 ``NN_name.md`` next to the script: the markdown cells as text, the code cells as fenced Python,
 what each cell printed (stdout) and the value of its last expression, and the figures it saved
-(``_figures.save`` → PNGs under ``notebooks/figures/`` written or rewritten while the cell ran,
+(``_figures.save`` → its own PNGs, ``NN_*.png`` under ``notebooks/figures/``, written or rewritten while the cell ran,
 recorded by nbclient's ``on_cell_execute``/``on_cell_executed`` hooks) as images. GitHub shows
 that file with its figures; Jupyter users open the ``.py`` itself with jupytext.
 
@@ -34,8 +34,10 @@ HERE = Path(__file__).resolve().parent
 TIMEOUT_S = 2400  # the slowest notebook (07) needs ~1050 s on a loaded 2-core machine
 
 
-def _figures_state(folder: Path) -> dict[str, int]:
-    return {p.name: p.stat().st_mtime_ns for p in folder.glob("*.png")} if folder.exists() else {}
+def _figures_state(folder: Path, prefix: str) -> dict[str, int]:
+    """Modification times of the notebook's own figures (``<NN>_*.png``, NN its number): another
+    notebook running at the same time writes into the same folder, never under this prefix."""
+    return {p.name: p.stat().st_mtime_ns for p in folder.glob(f"{prefix}_*.png")} if folder.exists() else {}
 
 
 def execute(script: Path, *, timeout: float = TIMEOUT_S, figures: Path | None = None,
@@ -59,6 +61,7 @@ def execute(script: Path, *, timeout: float = TIMEOUT_S, figures: Path | None = 
     """
     script = Path(script).resolve()
     figures = Path(figures) if figures is not None else script.parent / "figures"
+    prefix = script.stem.split("_")[0]
     notebook = jupytext.read(script)
     env = dict(os.environ, NOTEBOOK_FIGURES=str(figures), MPLBACKEND="Agg")
     deadline = time.monotonic() + timeout
@@ -66,10 +69,10 @@ def execute(script: Path, *, timeout: float = TIMEOUT_S, figures: Path | None = 
     state: dict[str, object] = {}
 
     def before(cell, cell_index, **kwargs):
-        state["figures"], state["t0"] = _figures_state(figures), time.perf_counter()
+        state["figures"], state["t0"] = _figures_state(figures, prefix), time.perf_counter()
 
     def after(cell, cell_index, **kwargs):
-        now = _figures_state(figures)
+        now = _figures_state(figures, prefix)
         new = sorted(n for n, t in now.items() if state["figures"].get(n) != t)
         if new:
             saved[cell_index] = new

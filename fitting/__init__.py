@@ -67,6 +67,7 @@ from ._parameters import alpha as alpha
 from ._parameters import bspline_basis as bspline_basis
 from ._parameters import dispersion as dispersion
 from ._parameters import index_n as index_n
+from ._parameters import instrument as instrument
 from ._parameters import load_fit_parameters as load_fit_parameters
 from ._parameters import parameters_from_declarations as parameters_from_declarations
 from ._parameters import rho_g as rho_g
@@ -92,6 +93,7 @@ __all__ = [
     "bspline_basis",
     "dispersion",
     "index_n",
+    "instrument",
     "rho_g",
     "thickness",
     "FitResult",

@@ -5,7 +5,8 @@ A :class:`Dataset` is what one instrument geometry read on every sample of the f
 resampled linearly onto the model grid — which must lie inside the data's range: nothing is
 extrapolated), with optional per-point standard deviations σ (or weights) and a mask of valid
 points. An :class:`Objective` joins a template :class:`~layerstack_jax.Stack`, the model grid,
-the free :class:`~fitting.Parameter` s and one or several datasets (several geometries, R and T,
+the free :class:`~fitting.Parameter` s (numbers of the stack, or of a dataset's geometry:
+:func:`~fitting.instrument`) and one or several datasets (several geometries, R and T,
 CIELAB colours of a colorimeter through a :class:`layerstack_jax.ColourSpace`, the bare background).
 
 Residuals (model − data, weighted): for each dataset,
@@ -367,7 +368,8 @@ class Objective:
         self.datasets = tuple(datasets)
         self.n_samples = int(n_samples)
         self.nodes = int(nodes)
-        self.layout = Layout([resolve_parameter(p, stack, grid, self.n_samples) for p in parameters], self.n_samples)
+        self.layout = Layout([resolve_parameter(p, stack, grid, self.n_samples, datasets) for p in parameters],
+                             self.n_samples)
         self._data = tuple(jnp.asarray(y) for y, _, _ in prepared)
         self._weight = tuple(jnp.asarray(w) for _, w, _ in prepared)
         self._mask = tuple(np.asarray(m) for _, _, m in prepared)
@@ -480,11 +482,13 @@ class Objective:
         nodes = self.nodes
         optics = optics or (None,) * len(self.datasets)
         coated = [i for i, ds in enumerate(self.datasets) if not ds.bare]
+        # instrument parameters (fitting.instrument) are shared scalars: put into the geometries once
+        geometries = self.layout.inject_geometries([ds.geometry for ds in self.datasets], coefficients)
 
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            return tuple(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i], self.datasets[i].colour)
+            return tuple(_measure(st, grid, geometries[i], nodes, optics[i], self.datasets[i].colour)
                          for i in coated)
 
         if any(per):
@@ -500,7 +504,7 @@ class Objective:
             cs = [f if ps else s for s, f, ps in zip(shared, first, per)]
             st = _bare(self.layout.inject(self.stack, cs, None))
             for i in bare:
-                result[i] = jnp.reshape(_measure(st, grid, self.datasets[i].geometry, nodes, optics[i],
+                result[i] = jnp.reshape(_measure(st, grid, geometries[i], nodes, optics[i],
                                                  self.datasets[i].colour), (1, -1))
         return tuple(result[i] for i in range(len(self.datasets)))
 

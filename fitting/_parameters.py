@@ -14,6 +14,16 @@ A path may end with an element index into a 1-D array leaf — one term of a Sel
 (``("layers", "glass", "index", "B", 0)``), one oscillator of a list — so that single entries
 are fitted while the others stay as in the stack (:class:`Layout` sets them with ``.at[].set``).
 
+A path rooted at ``"datasets"`` names a number of the instrument instead of the stack — a field
+of a dataset's geometry such as an ellipsometer's ``angle_offset_deg``, ``bandwidth_nm`` or
+``thickness_spread`` (:class:`layerstack_jax.Ellipsometric`): ``("datasets", 0,
+"angle_offset_deg")`` for dataset 0, ``("datasets", (0, 1, 2), "angle_offset_deg")`` for one value
+shared by datasets 0–2, ``("datasets", "all", "angle_offset_deg")`` for every dataset whose
+geometry has that field (one offset for all angles of a multi-angle fit); built by
+:func:`instrument`. The :class:`~fitting.Objective` puts the value into each named geometry
+(:meth:`Layout.inject_geometries`) before it measures; such a parameter is one scalar shared by
+all samples.
+
 A parameter is *shared* by all samples of a fit or *per sample* (``per_sample=True``: one
 coefficient vector per sample, e.g. the thicknesses of a calibration series).
 
@@ -54,6 +64,7 @@ __all__ = [
     "rho_g",
     "index_n",
     "dispersion",
+    "instrument",
     "bspline_basis",
     "ResolvedParameter",
     "Layout",
@@ -192,6 +203,81 @@ def dispersion(medium: LayerRef, coefficient: str, *, value=None, lower=None, up
     lo = lower if lower is not None else (0.0 if coefficient == "k" else None)
     return Parameter(_layer_path(medium, "index", coefficient), kind, name or f"{coefficient}[{medium}]", value, lo,
                      upper, None, per_sample, 0.0, scale)
+
+
+def instrument(field: str, datasets: Union[int, Sequence[int], str] = "all", *, value=None, lower=None, upper=None,
+               name: str = "", scale=None) -> Parameter:
+    """A number of the instrument: field ``field`` of the geometry of one or several datasets of
+    the fit, one scalar shared by all of them (module docstring).
+
+    ``field``: e.g. ``"angle_offset_deg"`` (degrees), ``"bandwidth_nm"`` (FWHM, nm; give
+    ``lower=0``) or ``"thickness_spread"`` (relative σ; give ``lower=0`` and an ``upper`` below
+    :math:`1/x_K`, 0.127 with the default 21 nodes: beyond it a node thickness is negative) of a
+    :class:`layerstack_jax.Ellipsometric`. ``datasets``: an index, a sequence of indices
+    (one value for all of them, e.g. one angle offset for the datasets of three angles) or
+    ``"all"`` (every dataset whose geometry has the field). ``value``: start (default: the
+    geometry's value, which must then agree over the datasets). Start a spread or bandwidth above
+    0: their derivatives vanish at 0 (the average is even in them)."""
+    if isinstance(datasets, str):
+        if datasets != "all":
+            raise LayerstackError(f"fitting.instrument({field!r}): datasets must be an index, indices or 'all', "
+                                  f"got {datasets!r}")
+        where = "all"
+    elif isinstance(datasets, (int, np.integer)) and not isinstance(datasets, bool):
+        where = int(datasets)
+    else:
+        where = tuple(int(i) for i in datasets)
+    return Parameter(("datasets", where, field), "other", name or field, value, lower, upper, None, False, 0.0, scale)
+
+
+def _instrument_parameter(p: Parameter, datasets: Sequence) -> "ResolvedParameter":
+    """Resolve a ``("datasets", which, field)`` parameter against the datasets of a fit: the
+    canonical path ``("datasets", (i, ...), field)``, a scalar start, bounds and scale."""
+    label = p.label
+    if len(p.path) != 3 or not isinstance(p.path[2], str):
+        raise LayerstackError(f"free parameter {label!r}: an instrument path is ('datasets', index | indices | 'all', "
+                              f"field), got {p.path!r}")
+    if p.per_sample or p.basis is not None:
+        raise LayerstackError(f"free parameter {label!r}: a number of the instrument is one scalar "
+                              "(no per_sample, no basis)")
+    which, field = p.path[1], p.path[2]
+    has = [i for i, ds in enumerate(datasets) if hasattr(ds.geometry, field) and not field.startswith("_")]
+    if which == "all":
+        which = tuple(has)
+        if not which:
+            raise LayerstackError(f"free parameter {label!r}: no dataset's geometry has a field {field!r}")
+    which = (which,) if isinstance(which, (int, np.integer)) else tuple(which)
+    for i in which:
+        if not isinstance(i, (int, np.integer)) or not 0 <= i < len(datasets):
+            raise LayerstackError(f"free parameter {label!r}: the fit has {len(datasets)} dataset(s), no dataset {i!r}")
+        if i not in has:
+            raise LayerstackError(f"free parameter {label!r}: dataset {i} ({type(datasets[i].geometry).__name__}) has "
+                                  f"no field {field!r}")
+    if p.value is not None:
+        x0 = np.asarray(p.value, dtype=float)
+    else:
+        starts = {float(np.asarray(getattr(datasets[i].geometry, field), dtype=float)) for i in which}
+        if len(starts) != 1:
+            raise LayerstackError(f"free parameter {label!r}: datasets {which} hold different {field} values "
+                                  f"{sorted(starts)}; give value=")
+        x0 = np.asarray(starts.pop())
+    if x0.shape != () or not np.isfinite(x0):
+        raise LayerstackError(f"free parameter {label!r}: value must be one finite number, got {p.value!r}")
+    x0 = x0.reshape(1)
+    dlo, dhi = _DEFAULT_BOUNDS[p.kind]
+    lo, hi = _broadcast(p, "lower bound", p.lower, 1, dlo), _broadcast(p, "upper bound", p.upper, 1, dhi)
+    if lo[0] >= hi[0] or not lo[0] <= x0[0] <= hi[0]:
+        raise LayerstackError(f"free parameter {label!r}: start {x0[0]:g} and bounds [{lo[0]:g}, {hi[0]:g}] "
+                              "are inconsistent")
+    span = hi - lo
+    scale = (_broadcast(p, "scale", p.scale, 1, 1.0) if p.scale is not None
+             else np.where(x0 != 0, np.abs(x0), np.where(np.isfinite(span), span, 1.0)))
+    return ResolvedParameter(p, ("datasets", which, field), None, x0, lo, hi, scale, (), np.zeros(1, bool))
+
+
+def is_instrument_path(path: tuple) -> bool:
+    """True for a path into the datasets' geometries (:func:`instrument`), not into the stack."""
+    return bool(path) and path[0] == "datasets"
 
 
 # --------------------------------------------------------------------------- basis
@@ -449,8 +535,12 @@ def _broadcast(p: Parameter, what: str, v, m: int, default: float) -> np.ndarray
     return a
 
 
-def resolve_parameter(p: Parameter, stack: Stack, wavelength_nm: np.ndarray, n_samples: int) -> ResolvedParameter:
-    """Check ``p`` against the stack and grid; build its basis, start, bounds and scale."""
+def resolve_parameter(p: Parameter, stack: Stack, wavelength_nm: np.ndarray, n_samples: int,
+                      datasets: Sequence = ()) -> ResolvedParameter:
+    """Check ``p`` against the stack and grid (or, for an :func:`instrument` path, against the
+    ``datasets`` of the fit); build its basis, start, bounds and scale."""
+    if is_instrument_path(p.path):
+        return _instrument_parameter(p, datasets)
     label = p.label
     path = canonical_path(stack, p)
     wl = np.asarray(wavelength_nm, float)
@@ -571,7 +661,15 @@ class Layout:
         self.n_samples = n_samples
         # the stack leaves changed, each with [(parameter index, element or None for the whole leaf)]
         self._targets: dict = {}
+        # the geometry fields changed: (dataset, field) -> parameter index
+        self._instrument: dict = {}
         for i, p in enumerate(self.params):
+            if is_instrument_path(p.path):
+                for k in p.path[1]:
+                    if (k, p.path[2]) in self._instrument:
+                        raise LayerstackError(f"free parameter {p.name!r}: {p.path[2]} of dataset {k} is freed twice")
+                    self._instrument[(k, p.path[2])] = i
+                continue
             taken = self._targets.setdefault(p.leaf_path, [])
             if any(e is None or p.element is None or e == p.element for _, e in taken):
                 raise LayerstackError(f"free parameter {p.name!r}: the same stack leaf {p.path} is freed twice")
@@ -684,6 +782,8 @@ class Layout:
                 c = c[sample]
             leaves.append(p.leaf(c))
         values = []
+        if not self._targets:
+            return stack
         for lp, taken in self._targets.items():
             if taken[0][1] is None:  # the whole leaf
                 values.append(leaves[taken[0][0]])
@@ -700,3 +800,12 @@ class Layout:
             tuple(values),
             is_leaf=lambda x: x is None,
         )
+
+    def inject_geometries(self, geometries: Sequence, coefficients: list) -> tuple:
+        """The datasets' geometries with the :func:`instrument` parameters put in (one scalar
+        each, ``equinox.tree_at``); geometries no parameter names are returned as they are."""
+        out = list(geometries)
+        for (k, field), i in self._instrument.items():
+            value = jnp.reshape(coefficients[i], ())
+            out[k] = eqx.tree_at(lambda g: getattr(g, field), out[k], value)
+        return tuple(out)

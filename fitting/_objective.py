@@ -375,12 +375,30 @@ class Objective:
         self._mask = tuple(np.asarray(m) for _, _, m in prepared)
         self.sigma_given = all(ds.sigma is not None for ds in datasets)
         self.n_points = int(sum(m.sum() for m in self._mask))
+        self._check_wavelengths_read()
         self.optics = self._fixed_optics()
         # check once, eagerly, that the forward model runs on the grid (tables cover it, …)
         try:  # traced once, not run: static checks (tables cover the grid, shapes) happen at trace time
             jax.eval_shape(self.predict, jnp.asarray(self.layout.x0))
         except LayerstackError as e:
             raise LayerstackError(f"model at the starting values: {e}") from None
+
+    def _check_wavelengths_read(self) -> None:
+        """Material tables against the wavelengths each instrument reads beyond the model grid
+        (:meth:`~layerstack_jax.Geometry.wavelengths_read`: an ellipsometer's bandwidth), its
+        free instrument parameters at their upper bounds where finite (the widest band a fit may
+        reach), else at their starting values."""
+        layout = self.layout
+        x = np.where(np.isfinite(layout.upper), layout.upper, layout.x0.reshape(-1))
+        geometries = layout.inject_geometries([ds.geometry for ds in self.datasets], layout.split(jnp.asarray(x)))
+        for ds, g in zip(self.datasets, geometries):
+            span = np.asarray(g.wavelengths_read(self.wavelength))
+            if span.size and (span.min() < self.wavelength.min() or span.max() > self.wavelength.max()):
+                try:
+                    check_table_ranges(self.stack, span)
+                except LayerstackError as e:
+                    raise LayerstackError(f"dataset {ds.label}: the instrument reads {span.min():g}–{span.max():g} nm "
+                                          f"(its bandwidth around the model grid): {e}") from None
 
     def _fixed_optics(self):
         """Per dataset, the :func:`layerstack_jax.fixed_optics` of the template stack when no

@@ -486,6 +486,16 @@ class Ellipsometric(Geometry):
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S,
                 "depolarization": e.depolarization}[self.quantity]
 
+    def wavelengths_read(self, wavelength_nm) -> np.ndarray:
+        """The grid, widened by the outermost wavelength nodes of the bandwidth average
+        (:func:`averaged_ncs`: λ ± σ_λ x_max of :func:`standard_normal_rule`) when the bandwidth
+        is concretely > 0 — where the material tables must have data."""
+        grid = np.asarray(wavelength_nm, dtype=float)
+        if self._is_zero("bandwidth_nm") or not is_concrete(self.bandwidth_nm):
+            return grid
+        reach = FWHM_TO_SIGMA * float(np.max(self.bandwidth_nm)) * float(np.max(standard_normal_rule(self.average_nodes)[0]))
+        return np.concatenate([grid - reach, grid + reach])
+
     def residual(self, model, data):
         """Model − data; for ``'delta'`` wrapped into (−180°, 180°] by :func:`wrap_degrees`
         (derivative 1 in ``model``, NaN-free), so that Δ = 179° against data −179° is a 2° miss."""

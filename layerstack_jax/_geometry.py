@@ -25,6 +25,7 @@ from typing import ClassVar, Optional
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from ._custom_types import Array, Float, RealLike
 from ._fresnel import exit_medium_ratio
@@ -146,6 +147,12 @@ class Geometry(eqx.Module):
         difference ``model - data`` unless the reading lives on a circle (an ellipsometer's Δ,
         wrapped into (−180°, 180°]); an override must stay differentiable in ``model``."""
         return model - data
+
+    def wavelengths_read(self, wavelength_nm) -> np.ndarray:
+        """The wavelengths (nm) at which the materials are evaluated for a reading on
+        ``wavelength_nm``: the grid itself, or wider where the instrument averages over a band
+        (an ellipsometer's bandwidth). ``fitting.Objective`` checks the material tables against it."""
+        return np.asarray(wavelength_nm, dtype=float)
 
     def prediction_columns(self, text: str) -> list:
         """``[(column name, geometry)]`` that ``layerstack predict -g text`` writes."""

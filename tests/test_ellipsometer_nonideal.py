@@ -267,3 +267,27 @@ def test_instrument_parameter_on_chosen_datasets_and_errors():
     mixed = [ft.Dataset(ls.Ellipsometric(65.0, "psi", angle_offset_deg=0.1), data[0][2]), datasets[2]]
     with pytest.raises(ls.LayerstackError, match="give value="):
         ft.Objective(_stack(), wl, mixed, [ft.instrument("angle_offset_deg")])
+
+
+def test_bandwidth_beyond_a_material_table_is_refused_when_the_objective_is_built():
+    """The bandwidth average reads λ ± 7.85 σ_λ (21 Gauss–Hermite nodes): a table ending at the
+    model grid's edge is refused when the Objective is built, naming the dataset and the span —
+    for a fixed bandwidth, and for a free one at its upper bound — not inside the solve."""
+    table = ls.Tabulated(np.array([400.0, 600.0, 800.0]), np.array([3.9, 3.9, 3.7]), np.array([0.02, 0.02, 0.01]),
+                         name="tab")
+    stack = ls.Stack(N_AMB, [ls.Layer(N_FILM, D_FILM, coherent=True, name="film")], ls.Substrate(table))
+    grid = np.array([420.0, 600.0, 780.0])  # 20 nm inside the table at both ends
+    data = np.zeros(grid.size)
+    params = [ft.thickness("film")]
+
+    def build(geometry, extra=()):
+        return ft.Objective(stack, grid, ft.Dataset(geometry, data), params + list(extra))
+
+    build(ls.Ellipsometric(70.0, "psi"))  # ideal: reads the grid only
+    build(ls.Ellipsometric(70.0, "psi", bandwidth_nm=2.0))  # reach 6.7 nm: inside the table
+    with pytest.raises(ls.LayerstackError, match=r"ellipsometry:70:psi.*reads 353.*846.*tab.*400–800 nm") as info:
+        build(ls.Ellipsometric(70.0, "psi", bandwidth_nm=20.0))  # reach 66.7 nm
+    assert "bandwidth" in str(info.value)
+    build(ls.Ellipsometric(70.0, "psi", bandwidth_nm=1.0), [ft.instrument("bandwidth_nm", lower=0.0, upper=2.0)])
+    with pytest.raises(ls.LayerstackError, match="bandwidth"):
+        build(ls.Ellipsometric(70.0, "psi", bandwidth_nm=1.0), [ft.instrument("bandwidth_nm", lower=0.0, upper=20.0)])

@@ -77,7 +77,7 @@ from ._fresnel import exit_medium_ratio, fresnel_amplitudes, normal_wavevector, 
 from ._he_torrance import (SHADOWING_FORMS, auto_terms, check_scattering_inputs, directional_diffuse,
                            specular_attenuation)
 from ._illumination import snell_invariant
-from ._numerics import abs2, safe_divide, safe_divide_nonzero
+from ._numerics import abs2, as_complex, safe_divide, safe_divide_nonzero
 from ._response import natural
 from ._stack import ResolvedStack, Stack, Substrate, resolve
 from ._validate import LayerstackError, LayerstackWarning, is_concrete
@@ -136,7 +136,7 @@ def _seeded(x, seed):
 def _eta_specular(rs, dirn: _Direction, sigma0, tau, form):
     """η_s of the rough object seen from medium N, ``(2, *B)`` (Hirayama eq. 9)."""
     att = specular_attenuation(jnp.real(rs.n[-2]), dirn.cos_N, rs.wavelength, sigma0, tau, form=form)
-    return dirn.r[:, -1] * att[None]
+    return dirn.r[:, -1] * as_complex(att, dirn.r)[None]
 
 
 def rough_specular(rs: ResolvedStack, s, sigma0, tau, *, shadowing_form: str = "corrected"):
@@ -148,7 +148,8 @@ def rough_specular(rs: ResolvedStack, s, sigma0, tau, *, shadowing_form: str = "
     d_films = tuple(rs.d)
     eta = _eta_specular(rs, dirn, sigma0, tau, shadowing_form)
     k0 = 2.0 * math.pi / rs.wavelength
-    t_last = dirn.t[:, -1] * jnp.exp(-0.5 * (k0 * sigma0 * (dirn.q[-2] - dirn.q[-1])) ** 2)[None]
+    dq = dirn.q[-2] - dirn.q[-1]
+    t_last = dirn.t[:, -1] * jnp.exp(-0.5 * (as_complex(k0 * sigma0, dq) * dq) ** 2)[None]
     gamma, tau_t = _packet_recursion(_seeded(dirn.r, eta), _seeded(dirn.t, t_last), dirn.q[1:-1], d_films,
                                      rs.wavelength)
     R = abs2(gamma)

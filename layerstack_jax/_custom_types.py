@@ -19,7 +19,7 @@ the material class.
 from typing import Any, Callable, Protocol, Union, runtime_checkable
 
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Inexact, Int, Real
+from jaxtyping import Array, ArrayLike, Complex, Float, Inexact, Real
 
 
 @runtime_checkable
@@ -64,7 +64,6 @@ IndexSpectrum = Inexact[Union[Array, np.ndarray], "..."]
 __all__ = [
     "Array",
     "ArrayLike",
-    "Bool",
     "Complex",
     "Coefficients",
     "ComplexLike",
@@ -72,7 +71,6 @@ __all__ = [
     "Float",
     "Inexact",
     "IndexSpectrum",
-    "Int",
     "Real",
     "RealLike",
     "RealSpectrumLike",

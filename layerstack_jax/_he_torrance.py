@@ -96,7 +96,7 @@ from ._custom_types import Array, Float, RealLike
 from ._fresnel import fresnel_amplitudes, normal_wavevector
 from ._illumination import snell_invariant_from_cos
 from ._materials import as_material
-from ._numerics import abs2, safe_divide, sin_from_cos
+from ._numerics import abs2, as_complex, safe_divide, sin_from_cos
 from ._validate import (LayerstackError, LayerstackWarning, check_angle_deg, check_finite, check_nonnegative,
                         check_unit_interval, is_concrete)
 
@@ -259,7 +259,7 @@ def _fresnel_at(n_a, n_b, cos):
     in a (reuses :func:`layerstack_jax._fresnel.fresnel_amplitudes`)."""
     n_a = jnp.asarray(n_a).astype(complex)
     s = snell_invariant_from_cos(n_a, cos)
-    q_a = n_a * cos
+    q_a = n_a * as_complex(cos, n_a)
     q_b = normal_wavevector(n_b, s)
     return fresnel_amplitudes(n_a, q_a, jnp.asarray(n_b), q_b)
 
@@ -282,7 +282,7 @@ def specular_amplitudes(n_a, n_b, cos, wavelength_nm, sigma0, tau, *, form: str 
     in medium a; ``wavelength_nm``: vacuum wavelength; σ0, τ in nm; all broadcast to ``*B``.
     For σ0 = 0 it is the Fresnel amplitude exactly."""
     r, _ = _fresnel_at(n_a, n_b, cos)
-    return r * specular_attenuation(n_a, cos, wavelength_nm, sigma0, tau, form=form)[None]
+    return r * as_complex(specular_attenuation(n_a, cos, wavelength_nm, sigma0, tau, form=form), r)[None]
 
 
 def directional_diffuse(n_a, n_b, cos_i, cos_r, phi, wavelength_nm, sigma0, tau, *, n_terms: int,

@@ -333,7 +333,7 @@ def coherency_matrix(M):
     The elements are dimensionless, like M."""
     sig = jnp.asarray(PAULI)
     basis = jnp.einsum("kab,lcd->klacbd", sig, jnp.conj(sig)).reshape(4, 4, 4, 4)
-    return 0.25 * jnp.einsum("...klw,klij->...wij", jnp.asarray(M), basis)
+    return 0.25 * jnp.einsum("...klw,klij->...wij", as_complex(M, basis), basis)
 
 
 def cloude_eigenvalues(M):

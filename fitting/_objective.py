@@ -33,7 +33,9 @@ from typing import Optional, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
+from layerstack_jax._custom_types import RealLike
 from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LambertianBackground, LayerstackError,
                             LayerstackWarning, Stack, fixed_optics, reflectance)
 from layerstack_jax._stack import TabulatedSpectrum
@@ -179,13 +181,13 @@ class Dataset:
     """
 
     geometry: Geometry
-    data: object
-    sigma: object = None
-    weights: object = None
-    mask: object = None
-    wavelength_nm: object = None
+    data: RealLike
+    sigma: Optional[RealLike] = None
+    weights: Optional[RealLike] = None
+    mask: Optional[ArrayLike] = None
+    wavelength_nm: Optional[RealLike] = None
     name: str = ""
-    colour: object = None
+    colour: Optional[ColourSpace] = None
     bare: bool = False
 
     @property

@@ -50,7 +50,9 @@ from typing import Optional, Sequence, Union
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
+from layerstack_jax._custom_types import RealLike
 from layerstack_jax import Cauchy, Index, LambertianBackground, LayerstackError, Sellmeier, Stack
 from layerstack_jax._stack import as_spectrum
 from layerstack_jax.io import FreeDeclaration, load_fit_stack
@@ -117,14 +119,14 @@ class Parameter:
     path: tuple
     kind: str = "other"
     name: str = ""
-    value: object = None
-    lower: object = None
-    upper: object = None
-    basis: object = None
+    value: Optional[RealLike] = None
+    lower: Optional[RealLike] = None
+    upper: Optional[RealLike] = None
+    basis: Union[None, str, int, RealLike] = None
     per_sample: bool = False
     smoothness: float = 0.0
-    scale: object = None
-    fixed: object = None
+    scale: Optional[RealLike] = None
+    fixed: Optional[ArrayLike] = None
 
     def __post_init__(self):
         if not isinstance(self.path, tuple) or not self.path:

@@ -35,6 +35,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ._custom_types import Coefficients, TableColumn
 from ._materials import Material, Tabulated, _complex
 from ._validate import LayerstackError, check_nonnegative, is_concrete
 
@@ -296,10 +297,10 @@ class DatabaseFormula(Material):
     """
 
     kind: int = eqx.field(static=True)
-    coefficients: object
+    coefficients: Coefficients
     range_nm: tuple = eqx.field(static=True)
     k_wavelength_nm: Optional[tuple] = eqx.field(static=True, default=None)
-    k: object = None
+    k: Optional[TableColumn] = None
     name: str = eqx.field(static=True, default="formula")
 
     def __check_init__(self):

@@ -414,11 +414,11 @@ class Ellipsometric(Geometry):
       accuracy in the module docstring).
     """
 
-    angle_deg: object = 70.0
+    angle_deg: RealLike = 70.0
     quantity: str = eqx.field(static=True, default="psi")
-    angle_offset_deg: object = 0.0
-    bandwidth_nm: object = 0.0
-    thickness_spread: object = 0.0
+    angle_offset_deg: RealLike = 0.0
+    bandwidth_nm: RealLike = 0.0
+    thickness_spread: RealLike = 0.0
     nonuniform_layer: Optional[Union[int, str]] = eqx.field(static=True, default=None)
     average_nodes: int = eqx.field(static=True, default=GAUSS_NODES)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Mapping, NamedTuple, Optional
+from typing import Mapping, NamedTuple, Optional, Union
 
 import numpy as np
 
@@ -324,7 +324,7 @@ class FreeDeclaration(NamedTuple):
     name: str
     lower: Optional[float]
     upper: Optional[float]
-    basis: object
+    basis: Union[None, str, int, np.ndarray]
     per_sample: bool
     smoothness: float
     where: str

@@ -22,8 +22,8 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.py"))
 # is tested in the default run (tests/test_render_mitsuba.py, tests/test_render_lookup.py)
 SLOW = {"07_rendering_coated_objects"}
 TIMEOUT_S = 900  # per notebook, all cells together
-# 07 builds 19 coating tables, renders Figs. 8 (3 x 3) and 9 and compares both k_d forms: 1045 s
-# measured on this 2-core machine under load 10-12
+# 07 builds 19 coating tables, renders Figs. 8 (3 x 3) and 9 and compares both k_d forms: through
+# notebooks/execute.py 340 s measured on this 2-core machine under load ~4, 799 s under load ~7
 TIMEOUT_S_SLOW = 2400
 
 

@@ -286,8 +286,9 @@ if HAVE_MITSUBA:
 # surfaces is weaker than that of the ideally smooth surfaces due to the roughness, and the
 # iridescent colors are emphasized". The table above puts numbers on it: the mean CIE 1976
 # saturation $s_{uv}$ of the coated sphere's pixels and their mean luminance, smooth against
-# rough, with the bare sphere (neutral aluminium: its $s_{uv}$ is pure Monte-Carlo colour noise)
-# as the noise floor. The printout of the cell below states what the measurement says.
+# rough, with the bare sphere beside it (smooth aluminium is neutral — its $s_{uv}$ is Monte-Carlo
+# colour noise —, rough aluminium is not: roughness alone colours it, see below)
+# as the reference. The printout of the cell below states what the measurement says.
 
 # %%
 gains8 = {}

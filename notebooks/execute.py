@@ -31,7 +31,7 @@ from nbclient import NotebookClient
 
 HERE = Path(__file__).resolve().parent
 #: seconds one notebook may run in all (every cell together), unless ``timeout`` says otherwise
-TIMEOUT_S = 2400  # the slowest notebook (07) needs ~1050 s on a loaded 2-core machine
+TIMEOUT_S = 2400  # the slowest notebook (07): 340 s at load ~4, 799 s at load ~7 on this 2-core machine
 
 
 def _figures_state(folder: Path, prefix: str) -> dict[str, int]:

@@ -117,6 +117,12 @@ def test_free_model_coefficients_are_fitted(tmp_path):
     ("{ cauchy = [{ value = 1.5, free = true }, 0.004, 0.0, 1.0] }", "cauchy takes 1 to 3 coefficients"),
 ])
 def test_model_errors_name_the_coefficient(tmp_path, n_spec, message):
+    _refused(tmp_path, n_spec, message, load_stack)
+
+
+def _refused(tmp_path, n_spec, message, load):
+    """A one-film stack file whose ``n = n_spec`` ``load`` refuses with ``message``, naming the
+    file and the layer."""
     (tmp_path / "e.toml").write_text(f"""
 [[layers]]
 name = "film"
@@ -127,7 +133,7 @@ n = {n_spec}
 n = 1.5
 """)
     with pytest.raises(ls.LayerstackError, match=message) as info:
-        load_stack(tmp_path / "e.toml")
+        load(tmp_path / "e.toml")
     assert "e.toml" in str(info.value) and "film" in str(info.value)
 
 
@@ -325,15 +331,4 @@ def test_a_parameter_path_may_end_with_an_element_index():
     ("{ sellmeier = { B = { value = 0.7, free = true }, C = [0.005] } }", "sellmeier B must be a non-empty list"),
 ])
 def test_mixture_and_sellmeier_errors_name_file_layer_and_coefficient(tmp_path, n_spec, message):
-    (tmp_path / "e.toml").write_text(f"""
-[[layers]]
-name = "film"
-thickness_nm = 10
-coherent = true
-n = {n_spec}
-[substrate]
-n = 1.5
-""")
-    with pytest.raises(ls.LayerstackError, match=message) as info:
-        load_fit_stack(tmp_path / "e.toml")
-    assert "e.toml" in str(info.value) and "film" in str(info.value)
+    _refused(tmp_path, n_spec, message, load_fit_stack)

@@ -172,7 +172,8 @@ def _single_pass(rs, dirn: _Direction):
     amp = jnp.prod(dirn.t[:, :-1], axis=1)
     if not rs.d:
         return jnp.broadcast_to(amp, (2, *jnp.broadcast_shapes(amp.shape[1:], rs.wavelength.shape)))
-    phase = sum((2 * jnp.pi / rs.wavelength) * dirn.q[j + 1] * d for j, d in enumerate(rs.d))
+    k0 = as_complex(2 * jnp.pi / rs.wavelength, dirn.q)  # vacuum wavenumber (1/nm) in the phases' complex dtype
+    phase = sum(k0 * dirn.q[j + 1] * as_complex(d, dirn.q) for j, d in enumerate(rs.d))
     return amp * jnp.exp(1j * phase)
 
 

@@ -129,13 +129,17 @@ from ._geometry import Geometry
 from ._custom_types import Array, Complex, Float, RealLike
 from ._illumination import snell_invariant
 from ._numerics import abs2, safe_abs, safe_atan2, safe_divide, safe_sqrt
-from ._stack import ResolvedStack, Stack, resolve
+from ._polarimetry import front_correlations
+from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check_angle_deg, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["Ellipsometry", "EllipsometerReading", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
 
 #: the quantities an :class:`Ellipsometric` geometry reads (one per dataset)
 QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im", "depolarization")
+
+#: what an :class:`Ellipsometric` geometry analyses: the specular reflection or the transmitted beam
+MODES = ("reflection", "transmission")
 
 #: Gauss–Hermite nodes per averaged variable (wavelength, thickness): a static number (the
 #: default of ``Ellipsometric.average_nodes``; accuracy in the module docstring)
@@ -210,12 +214,19 @@ def psi_delta(r_s, r_p):
     return psi, delta
 
 
+def is_coherent(stack: Stack) -> bool:
+    """True when every layer of ``stack`` is coherent (static: the structure, not the numbers)."""
+    return all(stack.coherent)
+
+
 def _check_coherent(stack: Stack) -> None:
     for i, layer in enumerate(stack.layers):
         if not layer.coherent:
             raise LayerstackError(
-                f"layers[{i}] ({layer.name or 'unnamed'}): ellipsometry needs a fully coherent stack; "
-                "a thick incoherent layer depolarizes (use layerstack_jax.specular_mueller)"
+                f"layers[{i}] ({layer.name or 'unnamed'}): ellipsometry() needs a fully coherent stack "
+                "(a ratio r_p/r_s); a thick incoherent layer depolarizes: read it with "
+                "layerstack_jax.Ellipsometric(angle_deg).reading(stack, wavelength_nm) (psi, Delta, N, C, S and "
+                "the depolarization) or layerstack_jax.specular_mueller"
             )
 
 
@@ -224,6 +235,32 @@ def _amplitudes_resolved(rs: ResolvedStack, angle_rad):
     gamma, _, _ = packet_amplitudes(rs.n, rs.d, s, rs.wavelength)
     shape = jnp.broadcast_shapes(gamma.shape[1:], jnp.shape(s)[:-1] + (rs.wavelength.shape[-1],))
     return jnp.broadcast_to(gamma[0], shape), jnp.broadcast_to(gamma[1], shape)
+
+
+def _check_transmission(stack: Stack, rs: ResolvedStack) -> None:
+    """Transmission ellipsometry reads the beam leaving into a transparent specular exit medium."""
+    if isinstance(stack.exit, LambertianBackground):
+        raise LayerstackError("exit: transmission ellipsometry reads the beam transmitted into a specular exit "
+                              "medium (a Substrate), not into a LambertianBackground")
+    k = jnp.imag(rs.n[-1])
+    if is_concrete(k) and np.any(np.asarray(k) != 0):
+        raise LayerstackError("exit index: transmission ellipsometry needs a transparent exit medium (k = 0), "
+                              "where the transmitted beam reaches the analyser")
+
+
+def transmission_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
+    r"""Complex amplitude transmission coefficients :math:`(t_s, t_p)` of a coherent stack
+    into a transparent exit medium (the field ratios of ``tmm``: at normal incidence
+    :math:`t_p = t_s`). Arguments as :func:`reflection_amplitudes`; returns two complex arrays
+    ``(*angle, wl)``."""
+    _check_coherent(stack)
+    check_angle_deg("angle_deg", angle_deg)
+    rs = resolve(stack, wavelength_nm)
+    _check_transmission(stack, rs)
+    s = snell_invariant(rs.n[0], jnp.deg2rad(angle_deg))
+    _, tau, _ = packet_amplitudes(rs.n, rs.d, s, rs.wavelength)
+    shape = jnp.broadcast_shapes(tau.shape[1:], jnp.shape(s)[:-1] + (rs.wavelength.shape[-1],))
+    return jnp.broadcast_to(tau[0], shape), jnp.broadcast_to(tau[1], shape)
 
 
 def reflection_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
@@ -313,6 +350,52 @@ def mueller_ncs(r_s, r_p):
             safe_divide(jnp.imag(cross), total))
 
 
+def correlation_ncs(Q_s, Q_p, X):
+    r"""Normalized Mueller elements :math:`(N, C, S)` of a partially depolarizing beam from its
+    intensities :math:`Q_s, Q_p` (:math:`R_s, R_p` or :math:`T_s, T_p`) and s–p correlation
+    :math:`X = \langle a_p \bar a_s\rangle` (:func:`layerstack_jax._polarimetry.front_correlations`):
+
+    .. math::
+        N = \frac{Q_s - Q_p}{Q_s + Q_p},\qquad C = \frac{2\operatorname{Re} X}{Q_s + Q_p},\qquad
+        S = -\frac{2\operatorname{Im} X}{Q_s + Q_p}
+
+    (for one coherent beam :math:`X = a_p \bar a_s` and these are :func:`mueller_ncs`).
+    Real ``Q_s, Q_p``, complex ``X``, broadcast to ``(*B)``; returns three real ``(*B)`` arrays
+    (0 where no light arrives)."""
+    total = Q_s + Q_p
+    return (safe_divide(Q_s - Q_p, total), safe_divide(2.0 * jnp.real(X), total),
+            safe_divide(-2.0 * jnp.imag(X), total))
+
+
+def stack_ncs(stack: Stack, wavelength_nm, angle_deg, mode: str = "reflection"):
+    r"""What an ideal ellipsometer reads of any stack: the normalized Mueller elements
+    :math:`(N, C, S)` of the specular reflection (``mode='reflection'``) or of the transmitted
+    beam (``'transmission'``), each ``(*angle, wl)`` (module docstring, "Thick substrates").
+
+    A coherent stack: :func:`mueller_ncs` of its amplitudes (non-depolarizing,
+    :math:`N^2 + C^2 + S^2 = 1`). A stack with thick incoherent layers (e.g. a transparent
+    substrate slab with its backside): :func:`correlation_ncs` of the intensities and s–p
+    correlations composed through the thick layers by the adding rule
+    (:func:`layerstack_jax._polarimetry.front_correlations`): the incoherent sum of the beams
+    returned from the backside, partially depolarizing. ``mode`` and the stack structure are
+    static."""
+    if mode not in MODES:
+        raise LayerstackError(f"mode must be one of {MODES}, got {mode!r}")
+    if is_coherent(stack):
+        amplitudes = reflection_amplitudes if mode == "reflection" else transmission_amplitudes
+        return mueller_ncs(*amplitudes(stack, wavelength_nm, angle_deg))
+    check_angle_deg("angle_deg", angle_deg)
+    rs = resolve(stack, wavelength_nm)
+    if mode == "transmission":
+        _check_transmission(stack, rs)
+    th = jnp.deg2rad(jnp.asarray(angle_deg, dtype=float))
+    s = snell_invariant(rs.n[0], th)
+    c = front_correlations(rs, s)
+    c = c.R_front if mode == "reflection" else c.T_front
+    c = jnp.broadcast_to(c, (3, *jnp.shape(th), rs.wavelength.shape[-1]))
+    return correlation_ncs(jnp.real(c[0]), jnp.real(c[1]), c[2])
+
+
 def reading_from_ncs(N, C, S) -> EllipsometerReading:
     r"""ψ, Δ and depolarization reported from (averaged) :math:`N, C, S` (module docstring):
     :math:`\psi = \tfrac12\operatorname{atan2}(\sqrt{C^2+S^2}, N)`,
@@ -342,12 +425,13 @@ def _layer_index(stack: Stack, layer: Union[int, str, None]) -> int:
 
 def averaged_ncs(stack: Stack, wavelength_nm, angle_deg, *, bandwidth_nm=0.0, thickness_spread=0.0,
                  nonuniform_layer: Union[int, str, None] = None, average_wavelength: bool = True,
-                 average_thickness: bool = True, nodes: int = GAUSS_NODES):
+                 average_thickness: bool = True, nodes: int = GAUSS_NODES, mode: str = "reflection"):
     r"""Incoherent averages :math:`\bar N, \bar C, \bar S` over the instrument's Gaussian
     wavelength band and the Gaussian thickness of one layer (module docstring).
 
     Args:
-        stack: coherent stack; wavelength_nm: ``(wl,)`` nm; angle_deg: ``(*angle)`` degrees.
+        stack: any stack (:func:`stack_ncs`); wavelength_nm: ``(wl,)`` nm; angle_deg: ``(*angle)``
+            degrees.
         bandwidth_nm: FWHM b (nm) of the instrument function: :math:`\lambda' = \lambda +
             \sigma_\lambda x_j`, :math:`\sigma_\lambda = b/(2\sqrt{2\ln 2})`.
         thickness_spread: relative σ s of the thickness of ``nonuniform_layer``:
@@ -355,6 +439,7 @@ def averaged_ncs(stack: Stack, wavelength_nm, angle_deg, *, bandwidth_nm=0.0, th
         average_wavelength, average_thickness: static switches; False drops that variable's
             nodes (its mean is then the value at the centre).
         nodes: Gauss–Hermite nodes per averaged variable (static).
+        mode: ``'reflection'`` or ``'transmission'`` (static; :func:`stack_ncs`).
 
     Returns ``(N, C, S)``, each ``(*angle, wl)``: :math:`\sum_{i,j} w_i w_j\, N(\lambda +
     \sigma_\lambda x_j;\, d_i)` etc., the nodes of :func:`standard_normal_rule` evaluated in one
@@ -368,8 +453,7 @@ def averaged_ncs(stack: Stack, wavelength_nm, angle_deg, *, bandwidth_nm=0.0, th
     nodes_wl = (wl[None, :] + FWHM_TO_SIGMA * bandwidth_nm * jnp.asarray(xl)[:, None]).reshape(-1)  # (Kl*wl,)
 
     def ncs(st):
-        r_s, r_p = reflection_amplitudes(st, nodes_wl, angle_deg)  # (*angle, Kl*wl)
-        values = jnp.stack(mueller_ncs(r_s, r_p))  # (3, *angle, Kl*wl)
+        values = jnp.stack(stack_ncs(st, nodes_wl, angle_deg, mode))  # (3, *angle, Kl*wl)
         values = values.reshape(values.shape[:-1] + (xl.size, wl.shape[-1]))
         return jnp.tensordot(values, jnp.asarray(wlw), axes=([-2], [0]))  # (3, *angle, wl)
 
@@ -421,8 +505,11 @@ class Ellipsometric(Geometry):
     thickness_spread: RealLike = 0.0
     nonuniform_layer: Optional[Union[int, str]] = eqx.field(static=True, default=None)
     average_nodes: int = eqx.field(static=True, default=GAUSS_NODES)
+    mode: str = eqx.field(static=True, default="reflection")
 
     def __check_init__(self):
+        if self.mode not in MODES:
+            raise LayerstackError(f"Ellipsometric.mode must be 'reflection' or 'transmission', got {self.mode!r}")
         if self.quantity not in QUANTITIES:
             raise LayerstackError(
                 f"Ellipsometric.quantity must be one of {', '.join(map(repr, QUANTITIES))}, got {self.quantity!r}"
@@ -443,7 +530,7 @@ class Ellipsometric(Geometry):
                 raise LayerstackError("Ellipsometric.thickness_spread > 0 needs nonuniform_layer (the layer, by "
                                       "position or name, whose thickness spreads)")
 
-    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im|depolarization"
+    spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im|depolarization[:transmission]"
     signed: ClassVar[bool] = True  # Δ, C, S, Re ρ, Im ρ may be negative
     reads_diffuse_light: ClassVar[bool] = False
     reading_is_fraction: ClassVar[bool] = False
@@ -458,26 +545,38 @@ class Ellipsometric(Geometry):
         """True when every non-ideality is concretely 0: the reading is :func:`ellipsometry`'s."""
         return all(self._is_zero(n) for n in ("angle_offset_deg", "bandwidth_nm", "thickness_spread"))
 
+    def _coherent_ellipsometry(self, stack: Stack, wavelength_nm, angle) -> Ellipsometry:
+        """The ideal reading of a coherent stack from its amplitudes: :func:`ellipsometry`, or the
+        same of :math:`(t_s, t_p)` in transmission."""
+        if self.mode == "reflection":
+            return ellipsometry(stack, wavelength_nm, angle)
+        t_s, t_p = transmission_amplitudes(stack, wavelength_nm, angle)
+        psi, delta = psi_delta(t_s, t_p)
+        return Ellipsometry(jnp.rad2deg(psi), jnp.rad2deg(delta), t_p / t_s)
+
     def reading(self, stack: Stack, wavelength_nm) -> EllipsometerReading:
         """ψ, Δ, N, C, S and depolarization read for ``stack`` on ``wavelength_nm`` (nm), every
-        field ``(*angle, wl)``: the ideal :func:`ellipsometry` or, with a bandwidth or a thickness
-        spread, the averages of :func:`averaged_ncs` reported by :func:`reading_from_ncs`."""
+        field ``(*angle, wl)``: for a coherent stack, the ideal :func:`ellipsometry` (its
+        transmission twin with ``mode='transmission'``); with a bandwidth or a thickness spread,
+        or for a stack with thick incoherent layers (module docstring, "Thick substrates"), the
+        (averaged) :func:`stack_ncs` reported by :func:`reading_from_ncs`."""
         angle = self.angle_deg if self._is_zero("angle_offset_deg") else (
             jnp.asarray(self.angle_deg) + self.angle_offset_deg)
         band, spread = not self._is_zero("bandwidth_nm"), not self._is_zero("thickness_spread")
-        if not (band or spread):
-            e = ellipsometry(stack, wavelength_nm, angle)
+        if not (band or spread) and is_coherent(stack):
+            e = self._coherent_ellipsometry(stack, wavelength_nm, angle)
             return EllipsometerReading(e.psi_deg, e.delta_deg, e.N, e.C, e.S, jnp.zeros_like(e.psi_deg))
         N, C, S = averaged_ncs(stack, wavelength_nm, angle, bandwidth_nm=self.bandwidth_nm,
                                thickness_spread=self.thickness_spread, nonuniform_layer=self.nonuniform_layer,
-                               average_wavelength=band, average_thickness=spread, nodes=self.average_nodes)
+                               average_wavelength=band, average_thickness=spread, nodes=self.average_nodes,
+                               mode=self.mode)
         return reading_from_ncs(N, C, S)
 
     def measure(self, stack: Stack, wavelength_nm, *, nodes: int = 0, optics=None) -> Float[Array, "*angle wl"]:
         """The quantity read for ``stack`` on ``wavelength_nm`` (nm); ``nodes`` and ``optics``
         are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
-        if self.ideal and self.quantity in ("rho_re", "rho_im"):
-            rho = ellipsometry(stack, wavelength_nm, self.angle_deg).rho
+        if self.ideal and is_coherent(stack) and self.quantity in ("rho_re", "rho_im"):
+            rho = self._coherent_ellipsometry(stack, wavelength_nm, self.angle_deg).rho
             return jnp.real(rho) if self.quantity == "rho_re" else jnp.imag(rho)
         e = self.reading(stack, wavelength_nm)
         if self.quantity in ("rho_re", "rho_im"):
@@ -520,10 +619,15 @@ class Ellipsometric(Geometry):
     def label(self) -> str:
         a = self.angle_deg
         text = f"{float(a):g}" if is_concrete(a) and jnp.ndim(a) == 0 else "array"
-        return f"ellipsometry:{text}:{self.quantity}"
+        return f"ellipsometry:{text}:{self.quantity}" + (":transmission" if self.mode == "transmission" else "")
 
     @property
     def quantity_label(self) -> str:
+        if self.mode == "transmission":
+            return "transmission " + self._quantity_label()
+        return self._quantity_label()
+
+    def _quantity_label(self) -> str:
         return {"psi": "psi (degrees)", "delta": "Delta (degrees)", "N": "N = cos 2psi", "C": "C = sin 2psi cos Delta",
                 "S": "S = sin 2psi sin Delta", "rho_re": "Re rho = tan psi cos Delta",
                 "rho_im": "Im rho = -tan psi sin Delta",
@@ -531,14 +635,18 @@ class Ellipsometric(Geometry):
 
     @classmethod
     def parse(cls, text: str):
-        """``ellipsometry:ANGLE:QUANTITY`` (QUANTITY psi, delta, N, C, S, rho_re, rho_im or depolarization; default
-        psi; case-insensitive)."""
+        """``ellipsometry:ANGLE:QUANTITY[:MODE]`` (QUANTITY psi, delta, N, C, S, rho_re, rho_im or depolarization,
+        default psi; MODE reflection, the default, or transmission; case-insensitive), e.g.
+        ``ellipsometry:70:psi``, ``ellipsometry:30:delta:transmission``."""
         if not text.startswith("ellipsometry"):
             return None
         parts = text.split(":")
-        if not 2 <= len(parts) <= 3:
+        if not 2 <= len(parts) <= 4:
             raise ValueError(text)
         q = parts[2] if len(parts) > 2 else "psi"
         q = q.lower()
         q = q if q in ("psi", "delta", "rho_re", "rho_im", "depolarization") else q.upper()
-        return cls(float(parts[1]), q)
+        mode = parts[3].lower() if len(parts) > 3 else "reflection"
+        if mode not in MODES:
+            raise LayerstackError(f"{text!r}: the ellipsometer's mode is 'reflection' or 'transmission', got {parts[3]!r}")
+        return cls(float(parts[1]), q, mode=mode)

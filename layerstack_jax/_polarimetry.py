@@ -229,6 +229,17 @@ def _packet_correlations(n, d, s, wl, both_sides: bool) -> PacketIntensities:
 
 def _front_reflection_correlations(rs: ResolvedStack, s):
     """``(R_s, R_p, X)`` of the front reflection, shaped ``(3, *B)`` (complex dtype)."""
+    return front_correlations(rs, s).R_front
+
+
+def front_correlations(rs: ResolvedStack, s) -> PacketIntensities:
+    r"""The whole stack's correlations for light from the ambient at Snell invariant ``s``:
+    a :class:`~layerstack_jax._coherent.PacketIntensities` whose ``R_front`` and ``T_front`` are
+    each ``(3, *B)`` complex, :math:`(|a_s|^2, |a_p|^2, \langle a_p \bar a_s\rangle)` of the
+    front reflection and of the transmission into the exit (flux-normalized: the first two are
+    :math:`R_s, R_p` and :math:`T_s, T_p`), composed through thick layers by the adding rule
+    (module docstring). ``R_back``, ``T_back``: the same for light from the exit side (None
+    for a single coherent packet)."""
     wl = rs.wavelength
     thick = thick_media(rs.coherent)
     sides = len(thick) > 2
@@ -236,7 +247,7 @@ def _front_reflection_correlations(rs: ResolvedStack, s):
                for a, b in zip(thick[:-1], thick[1:])]
     beer = [beer_attenuation(rs.n[a], normal_wavevector(rs.n[a], s), rs.d[a - 1], rs.alpha[a - 1], wl)
             for a in thick[1:-1]]
-    return add_layers(packets, beer).R_front
+    return add_layers(packets, beer)
 
 
 def _reflection_mueller(R_s, R_p, X):

@@ -26,7 +26,10 @@ model structure and shared values evaluates ``step`` spectra per call as
 ``jax.lax.map(spectrum, rows, batch_size=chunk)`` — XLA vmaps the forward model over blocks of
 ``chunk`` spectra and loops over the blocks, so the intermediates scale with ``chunk``, never
 with N. A Python loop only over calls (the last one padded, so one compiled shape serves all)
-copies each call's result into the output array on the host and advances a progress bar.
+copies each call's result into the output array on the host and advances a progress bar. On a
+machine with several accelerators (``jax.local_devices()``) each call is split over all of them
+by ``jax.shard_map`` along the spectra: one process drives every device, each running the same
+chunked ``lax.map`` on its share of the rows (equal to one device's result: tests/test_sharding.py).
 Leaves that are not batched stay constants of the compiled function (critical angles and
 quadrature segments are laid out once); when only thick-layer thicknesses, α and ρg are
 batched, the Fresnel algebra (:func:`~layerstack_jax.fixed_optics`) is computed once, not per
@@ -260,11 +263,29 @@ def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int
         one = jax.tree_util.tree_unflatten(treedef, [next(first) if b else s for s, b in zip(shared, lay.batched)])
         optics = fixed_optics(one, wl, geometry, nodes=nodes)
     spectrum = _spectrum_function(treedef, shared, lay.batched, wl, geometry, nodes, optics)
-    fn = jax.jit(lambda rows: jax.lax.map(spectrum, rows, batch_size=chunk))
+    fn = jax.jit(_over_devices(lambda rows: jax.lax.map(spectrum, rows, batch_size=chunk)))
     _COMPILED[key] = fn
     while len(_COMPILED) > _MAX_COMPILED:
         _COMPILED.popitem(last=False)
     return fn
+
+
+def _over_devices(blocks: Callable) -> Callable:
+    """``blocks`` (rows ``(step, *core)`` -> ``(step, ...)``) split over every local device.
+
+    With one device, ``blocks`` itself. With several (accelerators, or CPU devices made by
+    ``XLA_FLAGS=--xla_force_host_platform_device_count``), a ``jax.shard_map`` over a 1-D mesh
+    of them: each device runs the same chunked ``lax.map`` on its contiguous share of the rows
+    (``step`` is a multiple of ``chunk`` × devices, see :func:`predict`), and the results come
+    back in row order. No communication between devices: the spectra are independent."""
+    devices = jax.local_devices()
+    if len(devices) == 1:
+        return blocks
+    mesh = jax.sharding.Mesh(np.array(devices), ("spectra",))
+    spec = jax.sharding.PartitionSpec("spectra")
+    # check_vma=False: the traced validation (an equinox error branch on replicated constants) mixes
+    # device-varying and replicated values in one cond; every output row is per-device anyway
+    return jax.shard_map(blocks, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
 
 
 def _rows(leaf, batch: tuple, core: tuple, flat_index: np.ndarray):
@@ -290,8 +311,9 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
         batch_shape: the batch axes, or None to infer them from the leaves.
         chunk: spectra per vmapped block (memory: about 1.7 MB per spectrum for a 401-λ sphere
             prediction over a background).
-        step: spectra per compiled call (rounded up to a multiple of ``chunk``): the host
-            copies and the progress bar advances once per call.
+        step: spectra per compiled call (rounded up to a multiple of ``chunk`` times the
+            number of local devices): the host copies and the progress bar advances once per
+            call. With several devices each call is split over all of them (module docstring).
         progress: True for a progress bar (tqdm), a callable ``f(done, total)``, or None/False.
             None shows a bar when more than 100,000 spectra are predicted.
         nodes: Gauss–Legendre nodes per critical-angle segment of the diffuse integrals.
@@ -329,7 +351,8 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
     if not is_concrete((stack, wl, geometry)):
         return _predict_traced(leaves, treedef, lay, wl, geometry, nodes, int(chunk))
     chunk = int(min(chunk, n))
-    step = int(-(-min(max(int(step), chunk), n) // chunk) * chunk)
+    per_call = chunk * len(jax.local_devices())  # one chunk per device at least: equal device shares
+    step = int(-(-min(max(int(step), per_call), n) // per_call) * per_call)
     batched = [(leaf, core) for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b]
     first = tuple(_rows(leaf, batch, core, np.zeros(1, int)) for leaf, core in batched)
     fn = _compiled(stack, lay, wl, geometry, nodes, chunk, _optics_fixed_by(stack, lay.names, lay.batched), first)

@@ -27,14 +27,18 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._custom_types import Array, Float, RealLike
+from ._custom_types import Array, Float, RealLike, RealSpectrumLike
 from ._fresnel import exit_medium_ratio
-from ._illumination import _snell, diffuse_joined, diffuse_resolved, hemisphere, natural_T_front
+from ._illumination import (_snell, diffuse_joined, diffuse_resolved, hemisphere, natural_T_front,
+                            snell_invariant_from_cos)
+from ._instrument import (DEFAULT_CONE_NODES, cap_measure, check_cone, cone_rule, covered,
+                          substituted_reading)
 from ._optics import Optics, check_optics, coherent_films
 from ._quadrature import DEFAULT_NODES
 from ._response import join_interfaces, natural, stack_interfaces, stack_intensities
-from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, check_angle_deg, is_concrete
+from ._stack import LambertianBackground, ResolvedStack, Stack, as_spectrum, resolve
+from ._validate import (LayerstackError, check, check_angle_deg, check_nonnegative, check_positive,
+                        check_unit_interval, is_concrete)
 
 # the illumination drivers are public through this module too (their historical home)
 from ._illumination import Diffuse, Response, diffuse, specular  # noqa: F401  (re-exported)
@@ -104,7 +108,7 @@ class Geometry(eqx.Module):
                 optics: Optional[Optics] = None) -> Float[Array, "*angle wl"]:
         """What this instrument reads for ``stack`` on ``wavelength_nm`` (nm), reusing
         ``optics`` (from :func:`fixed_optics`) when given. Shaped ``(*angle, wl)``."""
-        rs = resolve(stack, wavelength_nm)
+        rs = self._seen(resolve(stack, wavelength_nm))
         background = isinstance(stack.exit, LambertianBackground)
         if optics is None:
             optics = self.optics(rs, background, nodes)
@@ -119,6 +123,11 @@ class Geometry(eqx.Module):
                                   "from leaves with batch axes use layerstack_jax.predict(stack, wavelength_nm, "
                                   "geometry), which maps over them in bounded memory") from None
         return jnp.broadcast_to(out, out.shape[:-1] + rs.wavelength.shape[-1:])
+
+    def _seen(self, rs: ResolvedStack) -> ResolvedStack:
+        """The resolved stack as the instrument sees it: ``rs`` itself, or ``rs`` behind what the
+        instrument adds in front of the sample (a cover glass: :func:`~layerstack_jax._instrument.covered`)."""
+        return rs
 
     # -- how it prints and parses itself
     @property
@@ -203,43 +212,264 @@ def _split(text: str, kind: str, n_min: int, n_max: int) -> list[str]:
     return parts
 
 
+# ----------------------------------------------------------------- non-ideal instruments (issue 15)
+# Fields shared by Sphere and Directional (declared in each class, after its own angles, so that
+# positional construction stays as it was): a cover glass in front of the sample.
+
+
+def _is_zero(x) -> bool:
+    """True when ``x`` is None or concretely 0 everywhere: that non-ideality is left out and the
+    reading is computed exactly as by the ideal instrument (bit for bit)."""
+    return x is None or (is_concrete(x) and not np.any(np.asarray(x)))
+
+
+def _check_cover(name: str, g) -> None:
+    """Eager checks of the cover-glass fields of geometry ``g`` (class name ``name``)."""
+    if g.cover_index is None:
+        return
+    if not callable(g.cover_index):
+        check_positive(f"{name}.cover_index", g.cover_index)
+    check_nonnegative(f"{name}.cover_thickness_nm (nm)", g.cover_thickness_nm)
+    check_nonnegative(f"{name}.cover_alpha_per_nm (1/nm)", g.cover_alpha_per_nm)
+
+
+def _covered(g, rs: ResolvedStack) -> ResolvedStack:
+    if g.cover_index is None:
+        return rs
+    return covered(rs, g.cover_index, g.cover_thickness_nm, g.cover_alpha_per_nm, g.cover_contact)
+
+
+def _cone_invariants(rs: ResolvedStack, axis_deg, half_angle_deg, nodes: int):
+    """Snell invariants :math:`n_0\\sin\\theta_k` ``(*angle, K, 1 | wl)`` of the directions of
+    :func:`~layerstack_jax._instrument.cone_rule` (from their sines: a finite derivative in β
+    also where a direction meets the normal)."""
+    _, sin_t, _ = cone_rule(axis_deg, half_angle_deg, nodes)
+    return jnp.real(jnp.asarray(rs.n[0])) * sin_t[..., None]
+
+
+def _cone_interfaces(rs: ResolvedStack, axis_deg, half_angle_deg, nodes: int):
+    return stack_interfaces(rs, _cone_invariants(rs, axis_deg, half_angle_deg, nodes), both_sides=False)
+
+
+def _cone_T(rs: ResolvedStack, axis_deg, half_angle_deg, nodes: int):
+    """Natural-light collimated transmittance at the cone's directions, ``(*angle, K, 1 | wl)``."""
+    s = _cone_invariants(rs, axis_deg, half_angle_deg, nodes)
+    return natural(stack_intensities(rs, s, both_sides=False).T_front)
+
+
+def _cone_mean(T_k, axis_deg, half_angle_deg, nodes: int):
+    r"""Projected-solid-angle mean over the cone, :math:`\int T\cos\theta\,d\Omega /
+    \int\cos\theta\,d\Omega`, of ``T_k`` ``(*angle, K, wl)`` at the :func:`cone_rule` directions:
+    ``(*angle, wl)``. The factor :math:`1-\cos\beta` cancels (finite at β = 0)."""
+    cos_t, _, w = cone_rule(axis_deg, half_angle_deg, nodes)
+    c = w * cos_t
+    c = c / jnp.sum(c, axis=-1, keepdims=True)
+    return jnp.sum(c[..., None] * T_k, axis=-2)
+
+
+def _port_escape(rs: ResolvedStack, T_k, axis_deg, half_angle_deg, nodes: int):
+    r"""The part of the back-side diffuse transmittance :math:`t_b` that leaves into the specular
+    port's cone (half-angle β about the specular direction θ_0), ``(*angle, wl)``:
+    :math:`\frac{(n_0/n_g)^2}{\pi}\int_\text{cone} T(\theta)\cos\theta\,d\Omega` — the
+    radiance leaving the stack towards θ is :math:`(n_0/n_g)^2 T(\theta)` times that of the
+    diffuse flux under it (Simonot eq. 77, reciprocity), and over the whole hemisphere this
+    integral is :math:`t_b` itself (eq. 49 with the same reciprocity)."""
+    cos_t, _, w = cone_rule(axis_deg, half_angle_deg, nodes)
+    ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
+    solid = cap_measure(half_angle_deg)[..., None]
+    return ratio * solid / jnp.pi * jnp.sum((w * cos_t)[..., None] * T_k, axis=-2)
+
+
+def _options(text: str, keys: dict, flags: dict) -> dict:
+    """``key=value`` and flag options after a geometry's base spelling, as constructor keywords."""
+    out = {}
+    for part in text:
+        if not part:
+            continue
+        if "=" in part:
+            k, v = part.split("=", 1)
+            if k not in keys:
+                raise LayerstackError(f"unknown option {k!r} (known: {', '.join([*keys, *flags])})")
+            out[keys[k]] = float(v)
+        elif part in flags:
+            out[flags[part]] = True
+        else:
+            raise LayerstackError(f"unknown option {part!r} (known: {', '.join([*keys, *flags])})")
+    return out
+
+
+def _option_text(g, keys: dict, flags: dict, defaults: dict) -> str:
+    """The ``:key=value`` options of ``g`` whose value differs from the class default."""
+    out = []
+    for k, field in keys.items():
+        v = getattr(g, field)
+        if v is None or (is_concrete(v) and np.ndim(v) == 0 and float(v) == defaults.get(field)):
+            continue
+        out.append(f":{k}={_scalar_text(v) if not callable(v) else 'function'}")
+    out += [f":{k}" for k, field in flags.items() if getattr(g, field)]
+    return "".join(out)
+
+
+_COVER_OPTIONS = {"cover": "cover_index", "cover_d": "cover_thickness_nm", "cover_alpha": "cover_alpha_per_nm"}
+_COVER_FLAGS = {"contact": "cover_contact"}
+_COVER_DEFAULTS = {"cover_thickness_nm": 1.0e6, "cover_alpha_per_nm": 0.0}
+
+
 class Sphere(Geometry):
-    """Integrating sphere, collimated illumination at ``incidence_deg``; specular component
+    r"""Integrating sphere, collimated illumination at ``incidence_deg``; specular component
     ``'excluded'`` (SCE, Simonot eq. 78) or ``'included'`` (SCI: adds the front reflectance).
 
     ``incidence_deg`` in degrees from the normal, in [0, 90): a scalar, or an array ``(*angle)``
     that adds leading axes to the :func:`reflectance` output ``(*angle, wl)``.
+
+    The ideal sphere reads, over a :class:`LambertianBackground`,
+    :math:`\rho_s = t_b\,\rho_g T(\theta_0)/(1-\rho_g r_b)` (+ :math:`R(\theta_0)` in SCI).
+    The instrument as built (every field a differentiable pytree leaf, fittable with
+    ``fitting.instrument``; the defaults are the ideal sphere, read bit for bit as before):
+
+    * ``port_half_angle_deg`` β (degrees, SCE only): the specular exclusion port removes a cone
+      of half-angle β about the specular direction, not a single direction: the diffuse light
+      leaving into it is lost too,
+
+      .. math::
+          \rho_s = \rho_g T(\theta_0)\,\frac{t_b - \frac{(n_0/n_g)^2}{\pi}
+          \int_\text{cone} T(\theta)\cos\theta\,d\Omega}{1-\rho_g r_b},
+
+      integrated on the fixed nodes of :func:`~layerstack_jax._instrument.cone_rule`
+      (``cone_nodes`` × 2 ``cone_nodes`` directions). For a Lambertian exitance the fraction
+      lost is :math:`\cos\theta_0\sin^2\beta`. θ_0 + β < 90°.
+    * ``wall_reflectance`` ρ_w (None: the ideal sphere), ``sample_port_fraction`` f_s,
+      ``open_port_fraction`` f_h (entrance, detector and open specular ports; area fractions
+      of the sphere), ``reference_reflectance`` ρ_ref (the calibration standard; None: ρ_w):
+      the single-beam substitution reading (sphere multiplier; Labsphere technical guide §1.4,
+      Hanssen & Snail 2002) :math:`R = \rho_s(1-\rho_w f_w-\rho_\text{ref} f_s)/(1-\rho_w f_w
+      -\rho'_s f_s)`, :math:`f_w = 1-f_s-f_h`, :math:`\rho'_s` the sample's reflectance for
+      Lambertian light (:func:`~layerstack_jax._instrument.substituted_reading`). Each a scalar,
+      an array on the grid or a callable spectrum (ρ_w, ρ_ref).
+    * ``cover_index`` (None: no cover glass; a number, an array on the grid or a callable of
+      λ in nm), ``cover_thickness_nm`` (nm), ``cover_alpha_per_nm`` (1/nm), ``cover_contact``
+      (static): the sample behind a cover glass — a thick incoherent glass, then an air gap
+      (or, with ``cover_contact``, in optical contact), prepended to the stack
+      (:func:`~layerstack_jax._instrument.covered`); its specular reflection is excluded with
+      the sample's in SCE and included in SCI.
+
+    CLI: ``sphere:8:sce``, options ``:cone=5``, ``:wall=0.98:port=0.03:open=0.02:ref=0.99``,
+    ``:cover=1.52[:cover_d=1e6][:cover_alpha=0][:contact]``.
     """
 
     incidence_deg: RealLike = 8.0
     specular: str = eqx.field(static=True, default="excluded")
+    port_half_angle_deg: RealLike = 0.0
+    wall_reflectance: Optional[RealSpectrumLike] = None
+    sample_port_fraction: RealLike = 0.0
+    open_port_fraction: RealLike = 0.0
+    reference_reflectance: Optional[RealSpectrumLike] = None
+    cover_index: Optional[RealSpectrumLike] = None
+    cover_thickness_nm: RealLike = 1.0e6
+    cover_alpha_per_nm: RealLike = 0.0
+    cover_contact: bool = eqx.field(static=True, default=False)
+    cone_nodes: int = eqx.field(static=True, default=DEFAULT_CONE_NODES)
 
-    spelling: ClassVar[str] = "sphere:ANGLE:sce|sci"
+    spelling: ClassVar[str] = "sphere:ANGLE:sce|sci[:cone=DEG][:wall=R:port=F:open=F:ref=R][:cover=N]"
+    _OPTIONS: ClassVar[dict] = {"cone": "port_half_angle_deg", "wall": "wall_reflectance",
+                                "port": "sample_port_fraction", "open": "open_port_fraction",
+                                "ref": "reference_reflectance", **_COVER_OPTIONS}
+    _DEFAULTS: ClassVar[dict] = {"port_half_angle_deg": 0.0, "sample_port_fraction": 0.0, "open_port_fraction": 0.0,
+                                 **_COVER_DEFAULTS}
 
     def __check_init__(self):
         if self.specular not in ("excluded", "included"):
             raise LayerstackError(f"Sphere.specular must be 'excluded' or 'included', got {self.specular!r}")
         check_angle_deg("Sphere.incidence_deg", self.incidence_deg)
+        if not (isinstance(self.cone_nodes, int) and self.cone_nodes >= 1):
+            raise LayerstackError(f"Sphere.cone_nodes must be an int >= 1, got {self.cone_nodes!r}")
+        if not _is_zero(self.port_half_angle_deg):
+            if self.specular == "included":
+                raise LayerstackError("Sphere.port_half_angle_deg: the specular port is closed in SCI "
+                                      "(specular='included'); the port cone applies to SCE only")
+            check_cone("Sphere.port_half_angle_deg (degrees)", self.incidence_deg, self.port_half_angle_deg)
+        if self.wall_reflectance is None:
+            for name in ("sample_port_fraction", "open_port_fraction", "reference_reflectance"):
+                if not _is_zero(getattr(self, name)):
+                    raise LayerstackError(f"Sphere.{name} is given without wall_reflectance: the sphere "
+                                          "multiplier needs the wall reflectance (give wall_reflectance=...)")
+        else:
+            for name in ("wall_reflectance", "reference_reflectance"):
+                v = getattr(self, name)
+                if v is not None and not callable(v):
+                    check_unit_interval(f"Sphere.{name}", v)
+            check_unit_interval("Sphere.sample_port_fraction", self.sample_port_fraction)
+            check_unit_interval("Sphere.open_port_fraction", self.open_port_fraction)
+            if is_concrete((self.sample_port_fraction, self.open_port_fraction)):
+                check_unit_interval("Sphere.sample_port_fraction + open_port_fraction",
+                                    np.asarray(self.sample_port_fraction, float)
+                                    + np.asarray(self.open_port_fraction, float))
+        _check_cover("Sphere", self)
+
+    def _has_port(self) -> bool:
+        return self.specular == "excluded" and not _is_zero(self.port_half_angle_deg)
+
+    def _port(self):
+        """(θ_0, β), checked (eagerly, or at run time under jit)."""
+        theta = check_angle_deg("Sphere.incidence_deg", self.incidence_deg)
+        return theta, check_cone("Sphere.port_half_angle_deg (degrees)", theta, self.port_half_angle_deg)
+
+    def _seen(self, rs):
+        return _covered(self, rs)
 
     def optics(self, rs, background, nodes):
         incidence = _incidence(rs, check_angle_deg("Sphere.incidence_deg", self.incidence_deg))
         if not background:
             return _optics(self, rs, incidence, nodes=nodes)
-        return _optics(self, rs, incidence, None, *_back_hemisphere(rs, nodes), nodes=nodes)
+        port = _cone_interfaces(rs, *self._port(), self.cone_nodes) if self._has_port() else None
+        return _optics(self, rs, incidence, port, *_back_hemisphere(rs, nodes), nodes=nodes)
 
     def read(self, rs, o, background):
         front = join_interfaces(rs, o.incidence, both_sides=False)
         total = jnp.zeros_like(natural(front.R_front))
+        d = None
         if background:  # Simonot eqs. 69, 78
             d, rho = _diffuse_back(rs, o), rs.rho_g
-            total = d.t * rho * natural(front.T_front) / (1.0 - rho * d.r)
+            escape = d.t
+            if self._has_port():  # the diffuse light leaving into the port's cone is lost
+                T_k = natural(join_interfaces(rs, o.viewing, both_sides=False).T_front)
+                escape = d.t - _port_escape(rs, T_k, *self._port(), self.cone_nodes)
+            total = escape * rho * natural(front.T_front) / (1.0 - rho * d.r)
         if self.specular == "included":
             total = total + natural(front.R_front)
+        if self.wall_reflectance is not None:
+            total = self._substituted(rs, total, self._lambertian_reflectance(rs, o.nodes, d))
         return total
+
+    # -- the sphere multiplier (substitution reading)
+    def _sphere(self, rs):
+        """(ρ_w, f_s, f_h, ρ_ref) on the grid, checked."""
+        wl = rs.wavelength
+        wall = check_unit_interval("Sphere.wall_reflectance", as_spectrum(self.wall_reflectance, wl))
+        ref = wall if self.reference_reflectance is None else check_unit_interval(
+            "Sphere.reference_reflectance", as_spectrum(self.reference_reflectance, wl))
+        fs = check_unit_interval("Sphere.sample_port_fraction", self.sample_port_fraction)
+        fh = check_unit_interval("Sphere.open_port_fraction", self.open_port_fraction)
+        return wall, fs, fh, ref
+
+    def _lambertian_reflectance(self, rs, nodes, d):
+        r""":math:`\rho'_s`: the sample's reflectance for Lambertian light from the ambient,
+        :math:`r_f + t_f\rho_g t_b/(1-\rho_g r_b)` over a background (``d``: its back-side
+        :class:`Diffuse`), :math:`r_f` over a substrate."""
+        f = diffuse_resolved(rs, "front", nodes)
+        if d is None:
+            return f.r
+        rho = rs.rho_g
+        return f.r + f.t * rho * d.t / (1.0 - rho * d.r)
+
+    def _substituted(self, rs, first, lambertian):
+        wall, fs, fh, ref = self._sphere(rs)
+        return substituted_reading(first, lambertian, wall, fs, fh, ref)
 
     @property
     def label(self):
-        return f"sphere:{_scalar_text(self.incidence_deg)}:{'sce' if self.specular == 'excluded' else 'sci'}"
+        base = f"sphere:{_scalar_text(self.incidence_deg)}:{'sce' if self.specular == 'excluded' else 'sci'}"
+        return base + _option_text(self, self._OPTIONS, _COVER_FLAGS, self._DEFAULTS)
 
     @property
     def quantity_label(self):
@@ -249,59 +479,137 @@ class Sphere(Geometry):
     def parse(cls, text):
         if not text.startswith("sphere"):
             return None
-        parts = _split(text, "sphere", 1, 3)
-        angle = float(parts[1]) if len(parts) > 1 and parts[1] else 8.0
-        mode = parts[2] if len(parts) > 2 else "sce"
+        parts = text.split(":")
+        head, options = parts[:3], parts[3:]
+        if any("=" in p for p in head[1:]) or head[-1] == "contact":  # options right after the angle
+            raise ValueError("sphere: options follow sphere:ANGLE:sce|sci")
+        angle = float(head[1]) if len(head) > 1 and head[1] else 8.0
+        mode = head[2] if len(head) > 2 else "sce"
         if mode not in ("sce", "sci"):
             raise ValueError(mode)
-        return cls(angle, "excluded" if mode == "sce" else "included")
+        return cls(angle, "excluded" if mode == "sce" else "included",
+                   **_options(options, cls._OPTIONS, _COVER_FLAGS))
 
     def background_factor(self, rs, nodes):
         d = diffuse_resolved(rs, "back", nodes)
         out = stack_intensities(rs, _snell(rs, self.incidence_deg), both_sides=False)
         specular_part = natural(out.R_front) if self.specular == "included" else 0.0
-        return d.t * natural(out.T_front), d.r, lambda measured: measured - specular_part
+        escape = d.t
+        if self._has_port():
+            theta, beta = self._port()
+            escape = d.t - _port_escape(rs, _cone_T(rs, theta, beta, self.cone_nodes), theta, beta, self.cone_nodes)
+        A = escape * natural(out.T_front)
+        if self.wall_reflectance is None:
+            return A, d.r, lambda measured: measured - specular_part
+        # measured R = (S + A X) K / (base - f_s (r_f + B X)), X = ρg/(1 - ρg r_b): solved for A X
+        wall, fs, fh, ref = self._sphere(rs)
+        f = diffuse_resolved(rs, "front", nodes)
+        base = 1.0 - wall * (1.0 - fs - fh)
+        K, B = base - ref * fs, f.t * d.t
+
+        def prepare(measured):
+            X = (measured * (base - fs * f.r) - K * specular_part) / (K * A + measured * fs * B)
+            return A * X
+
+        return A, d.r, prepare
 
 
 class Directional(Geometry):
-    """Radiance detector: reflectance factor against a perfect white diffuser (Simonot eq. 79),
+    r"""Radiance detector: reflectance factor against a perfect white diffuser (Simonot eq. 79),
     illumination at ``incidence_deg``, viewing at ``viewing_deg`` (45/0, 0/45, …).
 
     Angles in degrees from the normal, in [0, 90), scalars or arrays broadcastable to a common
     ``(*angle)`` that adds leading axes to the :func:`reflectance` output ``(*angle, wl)``; the
-    value is a dimensionless reflectance factor.
+    value is a dimensionless reflectance factor,
+    :math:`(n_0/n_g)^2 T(\theta_0) T(\theta_0')\rho_g/(1-\rho_g r_b)` (eqs. 77, 79).
+
+    The instrument as built (differentiable leaves, fittable with ``fitting.instrument``; the
+    defaults are the ideal instrument, read bit for bit as before):
+
+    * ``illumination_half_angle_deg`` β_i, ``viewing_half_angle_deg`` β_v (degrees): finite
+      apertures. The illumination is a cone of uniform radiance of half-angle β_i about
+      ``incidence_deg``, the detector accepts a cone of half-angle β_v about ``viewing_deg``
+      with uniform responsivity; both readings (sample and white standard) are then weighted by
+      the projected solid angle :math:`\cos\theta\,d\Omega`, so the reading is the
+      :math:`\cos\theta\,d\Omega`-weighted mean of the point reading over both cones. The point
+      reading factorises in θ_0 and θ_0', so it is
+      :math:`(n_0/n_g)^2\,\bar T_i\,\bar T_v\,\rho_g/(1-\rho_g r_b)` with :math:`\bar T =
+      \int_\text{cone} T\cos\theta\,d\Omega / \int_\text{cone}\cos\theta\,d\Omega` on the fixed
+      nodes of :func:`~layerstack_jax._instrument.cone_rule` (``cone_nodes``). Each cone must
+      stay above the horizon.
+    * ``cover_index``, ``cover_thickness_nm``, ``cover_alpha_per_nm``, ``cover_contact``: a
+      cover glass in front of the sample, as for :class:`Sphere`.
+
+    CLI: ``45/0``, options ``:illum=DEG``, ``:view=DEG``, ``:cover=N`` … (e.g. ``45/0:illum=2:view=4``).
     """
 
     incidence_deg: RealLike = 45.0
     viewing_deg: RealLike = 0.0
+    illumination_half_angle_deg: RealLike = 0.0
+    viewing_half_angle_deg: RealLike = 0.0
+    cover_index: Optional[RealSpectrumLike] = None
+    cover_thickness_nm: RealLike = 1.0e6
+    cover_alpha_per_nm: RealLike = 0.0
+    cover_contact: bool = eqx.field(static=True, default=False)
+    cone_nodes: int = eqx.field(static=True, default=DEFAULT_CONE_NODES)
 
-    spelling: ClassVar[str] = "ANGLE/ANGLE (e.g. 45/0)"
+    spelling: ClassVar[str] = "ANGLE/ANGLE (e.g. 45/0)[:illum=DEG][:view=DEG][:cover=N]"
+    _OPTIONS: ClassVar[dict] = {"illum": "illumination_half_angle_deg", "view": "viewing_half_angle_deg",
+                                **_COVER_OPTIONS}
+    _DEFAULTS: ClassVar[dict] = {"illumination_half_angle_deg": 0.0, "viewing_half_angle_deg": 0.0, **_COVER_DEFAULTS}
 
     def __check_init__(self):
-        check_angle_deg(f"{type(self).__name__}.incidence_deg", self.incidence_deg)
-        check_angle_deg(f"{type(self).__name__}.viewing_deg", self.viewing_deg)
+        name = type(self).__name__
+        check_angle_deg(f"{name}.incidence_deg", self.incidence_deg)
+        check_angle_deg(f"{name}.viewing_deg", self.viewing_deg)
+        if not (isinstance(self.cone_nodes, int) and self.cone_nodes >= 1):
+            raise LayerstackError(f"{name}.cone_nodes must be an int >= 1, got {self.cone_nodes!r}")
+        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
+            if not _is_zero(getattr(self, half)):
+                check_cone(f"{name}.{half} (degrees)", getattr(self, axis), getattr(self, half))
+        _check_cover(name, self)
+
+    def _seen(self, rs):
+        return _covered(self, rs)
+
+    def _apertures(self):
+        """((θ, β or None) of the illumination, of the viewing), checked; β None: a point."""
+        name = type(self).__name__
+        out = []
+        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
+            theta = check_angle_deg(f"{name}.{axis}", getattr(self, axis))
+            beta = None if _is_zero(getattr(self, half)) else check_cone(f"{name}.{half} (degrees)", theta,
+                                                                          getattr(self, half))
+            out.append((theta, beta))
+        return out
 
     def optics(self, rs, background, nodes):
         if not background:
             raise _substrate_has_no_diffuse_light()
-        name = type(self).__name__
-        incidence = _incidence(rs, check_angle_deg(f"{name}.incidence_deg", self.incidence_deg))
-        viewing = _incidence(rs, check_angle_deg(f"{name}.viewing_deg", self.viewing_deg))
+        (ti, bi), (tv, bv) = self._apertures()
+        incidence = _incidence(rs, ti) if bi is None else _cone_interfaces(rs, ti, bi, self.cone_nodes)
+        viewing = _incidence(rs, tv) if bv is None else _cone_interfaces(rs, tv, bv, self.cone_nodes)
         return _optics(self, rs, incidence, viewing, *_back_hemisphere(rs, nodes), nodes=nodes)
 
     def read(self, rs, o, background):
         if not background:
             raise _substrate_has_no_diffuse_light()
-        front = join_interfaces(rs, o.incidence, both_sides=False)
-        view = join_interfaces(rs, o.viewing, both_sides=False)
+        (ti, bi), (tv, bv) = self._apertures()
+        front = natural(join_interfaces(rs, o.incidence, both_sides=False).T_front)
+        view = natural(join_interfaces(rs, o.viewing, both_sides=False).T_front)
+        if bi is not None:
+            front = _cone_mean(front, ti, bi, self.cone_nodes)
+        if bv is not None:
+            view = _cone_mean(view, tv, bv, self.cone_nodes)
         d, rho = _diffuse_back(rs, o), rs.rho_g
         # Simonot eqs. 77, 79: (n0/n_g)² T(θ0) T(θ0') ρg / (1 − ρg r_b)
         ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
-        return ratio * natural(front.T_front) * natural(view.T_front) * rho / (1.0 - rho * d.r)
+        return ratio * front * view * rho / (1.0 - rho * d.r)
 
     @property
     def label(self):
-        return f"{_scalar_text(self.incidence_deg)}/{_scalar_text(self.viewing_deg)}"
+        return (f"{_scalar_text(self.incidence_deg)}/{_scalar_text(self.viewing_deg)}"
+                + _option_text(self, self._OPTIONS, _COVER_FLAGS, self._DEFAULTS))
 
     @property
     def quantity_label(self):
@@ -309,15 +617,22 @@ class Directional(Geometry):
 
     @classmethod
     def parse(cls, text):
-        if "/" not in text or ":" in text:
+        base, *options = text.split(":")
+        if "/" not in base:
             return None
-        i, v = text.split("/")
-        return cls(float(i), float(v))
+        i, v = base.split("/")
+        return cls(float(i), float(v), **_options(options, cls._OPTIONS, _COVER_FLAGS))
+
+    def _mean_T(self, rs, theta, beta):
+        if beta is None:
+            return natural_T_front(rs, theta)
+        return _cone_mean(_cone_T(rs, theta, beta, self.cone_nodes), theta, beta, self.cone_nodes)
 
     def background_factor(self, rs, nodes):
         d = diffuse_resolved(rs, "back", nodes)
         ratio = exit_medium_ratio(rs.n[0], rs.n[-1])
-        A = ratio * natural_T_front(rs, self.incidence_deg) * natural_T_front(rs, self.viewing_deg)
+        (ti, bi), (tv, bv) = self._apertures()
+        A = ratio * self._mean_T(rs, ti, bi) * self._mean_T(rs, tv, bv)
         return A, d.r, lambda measured: measured
 
 
@@ -470,7 +785,7 @@ def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int 
     Returns None for a geometry that reads without optics (an ellipsometer).
     """
     _check_geometry(geometry)
-    rs = resolve(stack, wavelength_nm)
+    rs = geometry._seen(resolve(stack, wavelength_nm))
     return geometry.optics(rs, isinstance(stack.exit, LambertianBackground), nodes)
 
 
@@ -533,7 +848,7 @@ def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry,
     _check_geometry(geometry)
     measured = jnp.asarray(measured)
     unit = eqx.tree_at(lambda st: st.exit.reflectance, stack, 1.0)
-    rs = resolve(unit, wavelength_nm)
+    rs = geometry._seen(resolve(unit, wavelength_nm))
     A, r_b, prepare = geometry.background_factor(rs, nodes)
     measured = prepare(measured)
     return measured / (A + r_b * measured)

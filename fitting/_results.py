@@ -188,6 +188,8 @@ class FitResult:
             NaN at masked points.
         num_steps, converged, reason, result_code: solver outcome (``converged``: the solver
             met its tolerance; :data:`fitting._solve.STATUS`).
+        starts, starts_converged, starts_abandoned: multi-start: starts solved, converged, and
+            given up far above the best start (:func:`fitting._solve.give_up_rule`; None for one start).
         singular_values, rank: of the normalised Jacobian; ``non_identifiable``: list of
             ``{"parameters", "direction", "combination"}``.
         sigma_origin: σ behind the standard errors: ``"given"``, ``"estimated from residuals"``
@@ -233,6 +235,7 @@ class FitResult:
     non_identifiable: list
     starts: int = 1
     starts_converged: Optional[int] = None
+    starts_abandoned: Optional[int] = None
     sigma_origin: str = SIGMA_GIVEN
     sigma_given: bool = True
     sigma_estimate: float = float("nan")
@@ -271,7 +274,9 @@ class FitResult:
         lines = [
             "layerstack fit report",
             "=====================",
-            f"method            {self.method}" + (f" (multi-start: {self.starts_converged}/{self.starts} starts converged)"
+            f"method            {self.method}" + (f" (multi-start: {self.starts_converged}/{self.starts} starts converged"
+                                                  + (f", {self.starts_abandoned} given up far above the best"
+                                                     if self.starts_abandoned else "") + ")"
                                                   if self.starts > 1 else ""),
             f"converged         {conv}",
         ]
@@ -493,8 +498,21 @@ def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.
     return out, involved
 
 
+def _plain_residuals(objective: Objective, model, data) -> list:
+    """Unweighted residuals of every dataset, :meth:`~fitting.Objective.residual_of` (``model − data``;
+    Δ wrapped for an ellipsometer), as NumPy arrays: one compiled call, compiled once per objective
+    and shapes and kept with it (op by op, the Δ wrap alone cost milliseconds per fit)."""
+    import jax
+
+    fn = objective.__dict__.get("_plain_residuals")
+    if fn is None:
+        fn = objective.__dict__["_plain_residuals"] = jax.jit(
+            lambda ms, ds: tuple(objective.residual_of(i, m, d) for i, (m, d) in enumerate(zip(ms, ds))))
+    return [np.asarray(r) for r in fn(tuple(model), tuple(data))]
+
+
 def build_result(objective: Objective, options, out, args, *, scale_covariance, rank_rtol, starts=1,
-                 starts_converged=None, note: str = "", stats=None) -> FitResult:
+                 starts_converged=None, note: str = "", stats=None, starts_abandoned=None) -> FitResult:
     """:class:`FitResult` of one fit from its :class:`~fitting._solve.FitOutput` ``out``
     (NumPy, no batch axis) and data ``args``; ``stats``: its :class:`~fitting._statistics.FitStatistics`
     when already computed (a row of a batch's), else computed here by the same function."""
@@ -517,8 +535,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     masks = _mask(objective)
     data = [np.asarray(d) for d in args[0]]
     # the geometry's own residual (Δ wrapped into (−180°, 180°]), as in the fit itself
-    residuals = [np.where(m, mod - d if ds.colour is not None else np.asarray(ds.geometry.residual(mod, d)), np.nan)
-                 for ds, m, mod, d in zip(objective.datasets, masks, model, data)]
+    residuals = [np.where(m, r, np.nan) for m, r in zip(masks, _plain_residuals(objective, model, data))]
     data = [np.where(m, d, np.nan) for m, d in zip(masks, data)]
     pen = np.asarray(out.penalty)
     cost = 0.5 * (chi2 + float(np.sum(pen ** 2)))
@@ -543,7 +560,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
         reduced_chi2=red, dof=dof, n_points=int(stats.n_points), cost=cost, model=model, data=data,
         residuals=residuals, num_steps=int(out.num_steps), converged=converged, reason=result_message(code),
         result_code=code, singular_values=np.asarray(stats.singular_values), rank=int(stats.rank),
-        non_identifiable=non_ident, starts=starts, starts_converged=starts_converged,
+        non_identifiable=non_ident, starts=starts, starts_converged=starts_converged, starts_abandoned=starts_abandoned,
         sigma_origin=stats.sigma_origin, sigma_given=bool(objective.sigma_given), sigma_estimate=s, quality=verdict,
         warnings=warnings, at_bound=at_bound, not_separated=separated, note=note, rank_rtol=float(rank_rtol),
     )

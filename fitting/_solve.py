@@ -35,6 +35,7 @@ reason in the library's words.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Callable, NamedTuple, Optional
 
 import jax
@@ -54,7 +55,7 @@ from ._bounded import compiled_lbfgsb
 from ._objective import Objective
 from ._results import build_result
 from ._statistics import bound_contacts
-from ._status import CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
+from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
 __all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
            "RoundoffTrustRegion", "compiled_fit", "result_message", "multistart_points", "starting_point",
@@ -154,6 +155,21 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
     search: optx.AbstractSearch = RoundoffTrustRegion()
     verbose: Callable = _quiet
 
+    def terminate(self, fn, y, args, options, state, tags):
+        """optimistix's test, and the multi-start give-up rule: with ``options["give_up"] =
+        (steps, cost)``, a solve that has taken ``steps`` steps while its cost
+        :math:`\tfrac12\|r\|^2` is still above ``cost`` ends, marked
+        ``RESULTS.nonlinear_divergence`` (:data:`fitting._status.ABANDONED`; a result the
+        Gauss–Newton family never gives otherwise). A single fit passes :data:`NEVER`."""
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        give_up = (options or {}).get("give_up")
+        if give_up is None:
+            return done, result
+        steps, cost = give_up
+        f = 0.5 * sum(jnp.sum(jnp.square(r)) for r in jax.tree.leaves(state.f_info.residual))
+        hopeless = jnp.invert(done) & (state.num_steps >= steps) & (f > cost)
+        return done | hopeless, optx.RESULTS.where(hopeless, optx.RESULTS.nonlinear_divergence, result)
+
 
 def _optx_solver(o: SolverOptions):
     if o.method == "lm":
@@ -169,7 +185,8 @@ def _status(result, x):
     """The library's status (traced int) of an optimistix ``result`` at solution ``x``."""
     code = jnp.where(result == optx.RESULTS.successful, CONVERGED,
                      jnp.where(result == optx.RESULTS.nonlinear_max_steps_reached, MAX_STEPS,
-                               jnp.where(result == optx.RESULTS.nonfinite, NONFINITE, FAILED)))
+                               jnp.where(result == optx.RESULTS.nonfinite, NONFINITE,
+                                         jnp.where(result == optx.RESULTS.nonlinear_divergence, ABANDONED, FAILED))))
     return jnp.where(jnp.all(jnp.isfinite(x)), code, NONFINITE)
 
 
@@ -183,8 +200,10 @@ def compiled_cache(objective: Objective) -> dict:
 
 
 def _solve_function(objective: Objective, o: SolverOptions):
-    """Pure ``(start, args, optics) -> (x, steps, status)``; ``start`` is ``u`` (optimistix) or
-    ``z`` (L-BFGS-B); ``optics`` the objective's fixed optics (or None)."""
+    """Pure ``(start, args, optics, give_up) -> (x, steps, status)``; ``start`` is ``u``
+    (optimistix) or ``z`` (L-BFGS-B); ``optics`` the objective's fixed optics (or None);
+    ``give_up`` the multi-start give-up rule ``(steps, cost)`` (Levenberg–Marquardt only:
+    :meth:`LevenbergMarquardt.terminate`; :data:`NEVER` for a plain fit)."""
     layout = objective.layout
     if o.method == "lbfgsb":
         scale = jnp.asarray(layout.scale)
@@ -197,7 +216,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
 
         run = compiled_lbfgsb(cost, o.max_steps, o.gtol)
 
-        def solve(z0, args, optics):
+        def solve(z0, args, optics, give_up):
             sol = run(z0, lower, upper, args, optics)
             finite = jnp.all(jnp.isfinite(sol.x)) & jnp.isfinite(sol.value)
             status = jnp.where(~finite, NONFINITE, jnp.where(sol.converged, CONVERGED, MAX_STEPS))
@@ -207,23 +226,34 @@ def _solve_function(objective: Objective, o: SolverOptions):
 
     solver = _optx_solver(o)
 
-    def residuals(u, args_optics):
-        return objective.residuals(hold_on_bounds(layout, layout.to_physical(u)), *args_optics)
+    if o.method == "bfgs":  # BFGS needs only the gradient: plain reverse mode
+        def residuals(u, args_optics):
+            return objective.residuals(hold_on_bounds(layout, layout.to_physical(u)), *args_optics)
+
+        def solve(u0, args, optics, give_up):
+            sol = optx.minimise(lambda u, a: 0.5 * jnp.sum(residuals(u, a) ** 2), solver, u0, args=(args, optics),
+                                max_steps=o.max_steps, throw=False)
+            x = hold_on_bounds(layout, layout.to_physical(sol.value))
+            return x, sol.stats["num_steps"], _status(sol.result, x)
+
+        return solve
 
     # Least squares: optimistix linearises the residuals at every step and then materialises
     # and transposes that linear map several times (QR of the damped system, gradient, trust
     # region); with the Jacobian materialised once per step by forward mode, all of those are
-    # small dense products. BFGS needs only the gradient: plain reverse mode.
-    fn = residuals if o.method == "bfgs" else dense_jacobian(residuals)
+    # small dense products. That Jacobian is the statistics' one (w.r.t. z = x / scale, with
+    # the model values and residuals as its by-products, _statistics_function) times the
+    # derivative of z(u): optimistix keeps it, as the auxiliary output of its last accepted point,
+    # which is the solution — so the compiled fit holds one copy of the model's Jacobian, not two.
+    fn = jacobian_with_statistics(objective)
 
-    def solve(u0, args, optics):
-        if o.method == "bfgs":
-            sol = optx.minimise(lambda u, a: 0.5 * jnp.sum(fn(u, a) ** 2), solver, u0, args=(args, optics),
-                                max_steps=o.max_steps, throw=False)
-        else:
-            sol = optx.least_squares(fn, solver, u0, args=(args, optics), max_steps=o.max_steps, throw=False)
+    def solve(u0, args, optics, give_up):
+        # the give-up rule: Levenberg–Marquardt only (its terminate reads it)
+        sol = optx.least_squares(fn, solver, u0, args=(args, optics), has_aux=True, max_steps=o.max_steps,
+                                 throw=False, options={"give_up": give_up} if o.method == "lm" else None)
         x = hold_on_bounds(layout, layout.to_physical(sol.value))
-        return x, sol.stats["num_steps"], _status(sol.result, x)
+        (model, res, pen), J = sol.aux
+        return x, sol.stats["num_steps"], _status(sol.result, x), (model, res, pen, J)
 
     return solve
 
@@ -248,6 +278,55 @@ def hold_on_bounds(layout, x):
     lo, hi = bound_contacts(x, layout.lower, layout.upper, layout.scale, rtol=HOLD_RTOL, xp=jnp)
     lower, upper = (jnp.asarray(b, dtype=x.dtype) for b in (layout.lower, layout.upper))
     return jnp.where(lo, lower, jnp.where(hi, upper, x))
+
+
+def jacobian_with_statistics(objective: Objective):
+    r"""``fn(u, (args, optics)) -> (r, ((model, residuals, penalty), J))``: the residual
+    vector of the solver's coordinates ``u`` for optimistix (``has_aux=True``), at
+    :math:`z = x/s`, :math:`x` = :func:`hold_on_bounds` of ``layout.to_physical(u)``, and as
+    auxiliary output what the statistics need at that point (:func:`_statistics_function`:
+    model spectra, weighted data residuals, penalty residuals, :math:`J = \partial r/\partial z`).
+
+    One forward-mode pass (``jax.jacfwd``: one primal pass and P tangents) gives ``r``, the
+    by-products and :math:`J`; the derivative w.r.t. ``u`` is :math:`J\,D` with the ``(P, P)``
+    :math:`D = \partial z/\partial u` (zero columns for components held on a bound), applied
+    as a dense product (a custom JVP, as :func:`dense_jacobian`): linearising ``fn`` costs one
+    ``jacfwd`` of the model. Tangents of ``args`` (never used by the solvers) are propagated
+    exactly by a separate JVP."""
+    layout = objective.layout
+    scale = jnp.asarray(layout.scale)
+    parts = _residuals_and_parts(objective)
+
+    def z_of(u):
+        return hold_on_bounds(layout, layout.to_physical(u)) / scale
+
+    def evaluate(u, args_optics):
+        def value_twice(z):  # the Jacobian's function and, as aux, its value and by-products: one pass
+            flat, by = parts(z, *args_optics)
+            return flat, (flat, by)
+
+        J, (r, by) = jax.jacfwd(value_twice, has_aux=True)(z_of(u))
+        return r, (by, J)
+
+    @jax.custom_jvp
+    def g(u, args_optics):
+        return evaluate(u, args_optics)
+
+    def g_jvp(primals, tangents):
+        u, args_optics = primals
+        du, dargs = tangents
+        r, aux = evaluate(u, args_optics)
+        J = aux[1]
+        out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ (jax.jacfwd(z_of)(u) @ du)
+        if not all(isinstance(t, SymbolicZero) for t in jax.tree.leaves(
+                dargs, is_leaf=lambda t: isinstance(t, SymbolicZero))):
+            dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if isinstance(t, SymbolicZero) else t, dargs,
+                                 args_optics, is_leaf=lambda t: isinstance(t, SymbolicZero))
+            out = out + jax.jvp(lambda a: parts(z_of(u), *a)[0], (args_optics,), (dargs,))[1]
+        return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
+
+    g.defjvp(g_jvp, symbolic_zeros=True)
+    return g
 
 
 def dense_jacobian(fn):
@@ -292,9 +371,9 @@ def starting_point(objective: Objective, o: SolverOptions, x0) -> np.ndarray:
     return layout.to_unconstrained(x0)
 
 
-def _statistics_function(objective: Objective):
-    """Pure ``(x, args, optics) -> (model spectra, weighted data residuals, penalty, J)``, J the
-    Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units)."""
+def _residuals_and_parts(objective: Objective):
+    """Pure ``(z, args, optics) -> (r, (model spectra, weighted data residuals, penalty))`` at
+    ``x = z * scale``: the full residual vector and its parts."""
     scale = jnp.asarray(objective.layout.scale)
 
     def residuals_and_parts(z, args, optics):
@@ -304,6 +383,15 @@ def _statistics_function(objective: Objective):
         pen = objective.penalty(x)
         flat = jnp.concatenate([r.ravel() for r in res] + [pen])
         return flat, (model, res, pen)
+
+    return residuals_and_parts
+
+
+def _statistics_function(objective: Objective):
+    """Pure ``(x, args, optics) -> (model spectra, weighted data residuals, penalty, J)``, J the
+    Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units)."""
+    scale = jnp.asarray(objective.layout.scale)
+    residuals_and_parts = _residuals_and_parts(objective)
 
     def stats(x, args, optics):
         # one forward pass shared by the model, the residuals and the Jacobian
@@ -335,16 +423,17 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
         solve = _solve_function(objective, o)
         stats = _statistics_function(objective)
 
-        def run(start, args, optics):
+        def run(start, args, optics, give_up):
             with traced_checks_off():  # trial points are the solver's business (traced_checks_off)
-                x, steps, status = solve(start, args, optics)
-                return FitOutput(x, steps, status, *stats(x, args, optics))
+                x, steps, status, *at_x = solve(start, args, optics, give_up)
+                # least squares: the statistics' ingredients come with the solution (aux)
+                return FitOutput(x, steps, status, *(at_x[0] if at_x else stats(x, args, optics)))
 
         if batched:
             devices = jax.devices()
             k = len(devices)
 
-            def run_all(starts, args, optics):
+            def run_all(starts, args, optics, give_up):
                 n = starts.shape[0]
                 b = -(-min(block, n) // k) * k  # a multiple of the device count
                 pad = -n % b
@@ -355,13 +444,33 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
                 if k > 1:  # each block's fits split over the devices (the solves are independent)
                     split = NamedSharding(Mesh(np.asarray(devices), ("fits",)), PartitionSpec(None, "fits"))
                     blocks = jax.lax.with_sharding_constraint(blocks, split)
-                out = jax.lax.map(jax.vmap(lambda sa: run(sa[0], sa[1], optics)), blocks)
+                out = jax.lax.map(jax.vmap(lambda sa: run(sa[0], sa[1], optics, give_up)), blocks)
                 return jax.tree.map(lambda a: a.reshape((nb * b,) + a.shape[2:])[:n], out)
 
-            cache[key] = jax.jit(run_all)
+            cache[key] = _with_give_up(jax.jit(run_all))
         else:
-            cache[key] = jax.jit(run)
+            cache[key] = _with_give_up(jax.jit(run))
     return cache[key]
+
+
+#: The give-up rule ``(steps, cost)`` that never fires: a plain fit's (Python scalars: one
+#: compiled program serves every rule).
+NEVER = (2 ** 31 - 1, math.inf)
+
+
+class _with_give_up:
+    """``jitted(start, args, optics, give_up)`` callable as ``(start, args, optics)`` too (the
+    rule :data:`NEVER`); the jitted function's own attributes (``lower``, ``_cache_size`` …)
+    are its."""
+
+    def __init__(self, jitted):
+        self.jitted = jitted
+
+    def __call__(self, start, args, optics, give_up=NEVER):
+        return self.jitted(start, args, optics, give_up)
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["jitted"], name)
 
 
 def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
@@ -387,7 +496,7 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     jac_fn = jax.jit(jax.jacfwd(residuals))
     stats = jax.jit(statistics)
 
-    def one(z0, args, optics):
+    def one(z0, args, optics, give_up=None):  # no give-up rule on the host
         z0 = np.clip(np.asarray(z0, dtype=float), lower, upper)
         sol = least_squares(
             lambda z: np.asarray(res_fn(z, args, optics), dtype=float),
@@ -414,7 +523,7 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
     if not batched:
         return one
 
-    def run_all(starts, args, optics):
+    def run_all(starts, args, optics, give_up=None):
         outs = [one(starts[i], jax.tree.map(lambda a: a[i], args), optics) for i in range(starts.shape[0])]
         return jax.tree.map(lambda *a: jnp.stack(a), *outs)
 
@@ -497,11 +606,12 @@ def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -
     start = jnp.asarray(starting_point(objective, o, np.clip(np.asarray(out.x, float)[rows], layout.lower,
                                                              layout.upper)))
     args = jax.tree.map(jnp.asarray, args)
-    if len(rows) == 1 and ("fit", o, True, BLOCK) not in compiled_cache(objective):
-        # one fit (``fit`` with one start): the solver it has already compiled, not a batched copy
-        one = compiled_fit(objective, o, batched=False)(start[0], jax.tree.map(lambda a: a[0], args),
-                                                        objective.optics)
-        new = jax.tree.map(lambda a: np.asarray(a)[None], one)
+    if ("fit", o, True, BLOCK) not in compiled_cache(objective):
+        # fits of ``fit`` (one start or a multi-start): the solver it has compiled, one fit after
+        # the other, not a batched copy compiled for them
+        one = compiled_fit(objective, o, batched=False)
+        new = [one(start[k], jax.tree.map(lambda a: a[k], args), objective.optics) for k in range(len(rows))]
+        new = jax.tree.map(lambda *a: np.stack([np.asarray(v) for v in a]), *new)
     else:
         new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(start, args, objective.optics))
     return new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
@@ -542,29 +652,64 @@ def multistart_points(objective: Objective, starts: int, seed: int) -> np.ndarra
     return pts
 
 
-#: Starts solved per compiled call of a multi-start fit; progress is reported between calls.
+#: Multi-start: costs within this relative difference of the lowest are the same minimum.
+TIE_RTOL = 1e-9
+
+#: Above this many starts a multi-start shows a progress bar by default.
 STARTS_PER_CALL = 16
 
+#: The multi-start give-up rule (:func:`give_up_rule`): a start is given up once it has taken
+#: ``max(GIVE_UP_MIN_STEPS, GIVE_UP_STEPS × n)`` steps, n the steps of the best start converged
+#: before it, while its cost is still above ``GIVE_UP_COST`` × that start's cost.
+GIVE_UP_MIN_STEPS, GIVE_UP_STEPS, GIVE_UP_COST = 32, 3, 10.0
 
-def _multistart(objective: Objective, o: SolverOptions, y0, bargs, progress) -> FitOutput:
-    """All starts ``y0`` ``(S, P)`` (solver coordinates) with their args, solved
-    :data:`STARTS_PER_CALL` at a time by one compiled batched solve (the last call padded with
-    copies of start 0: one compiled shape); ``progress`` as :func:`layerstack_jax._progress.reporter`
-    (by default a bar when there is more than one call). NumPy output, one row per start."""
+
+def give_up_rule(best_cost: float, best_steps: int) -> tuple:
+    """``(steps, cost)`` of :meth:`LevenbergMarquardt.terminate` for a start solved after a
+    converged start of cost :math:`\tfrac12\|r\|^2` = ``best_cost`` found in ``best_steps``
+    steps (:data:`GIVE_UP_MIN_STEPS`, :data:`GIVE_UP_STEPS`, :data:`GIVE_UP_COST`); :data:`NEVER`
+    while no start has converged.
+
+    A start still a factor 10 above the best cost after three times the steps that start needed
+    is descending into another, worse minimum or wandering (on benchmark E1, 10 of 16 starts
+    ran 60–256 steps to costs 1e5–1e7 times the best, or to ``max_steps``): it cannot become the
+    chosen start, so solving it further is wasted time. It is counted as not converged
+    (:data:`fitting._status.ABANDONED`)."""
+    if not np.isfinite(best_cost):
+        return NEVER
+    return max(GIVE_UP_MIN_STEPS, GIVE_UP_STEPS * int(best_steps)), GIVE_UP_COST * float(best_cost)
+
+
+def _cost(out: FitOutput) -> np.ndarray:
+    """:math:`\tfrac12\|r\|^2` (data and penalty residuals) of NumPy fit output(s)."""
+    lead = np.shape(out.status)
+    data = sum(np.sum(np.asarray(r, float).reshape(lead + (-1,)) ** 2, axis=-1) for r in out.residuals)
+    return 0.5 * (data + np.sum(np.asarray(out.penalty, float).reshape(lead + (-1,)) ** 2, axis=-1))
+
+
+def _multistart(objective: Objective, o: SolverOptions, y0, args, progress) -> FitOutput:
+    """All starts ``y0`` ``(S, P)`` (solver coordinates) on the same ``args``, solved one after
+    the other by the fit's own compiled solver (:func:`compiled_fit`, not a batched copy: no
+    further compilation), each start after the first under the give-up rule of the best start
+    converged so far (:func:`give_up_rule`; Levenberg–Marquardt). On a CPU that is also the
+    fastest order: a vmapped block of starts costs per start about twice a single solve's step
+    and runs until its slowest start ends (benchmark E1). ``progress`` as
+    :func:`layerstack_jax._progress.reporter` (by default a bar above :data:`STARTS_PER_CALL`
+    starts). NumPy output, one row per start."""
     n = y0.shape[0]
-    per = min(n, STARTS_PER_CALL)
-    calls = -(-n // per)
-    fn = compiled_fit(objective, o, batched=True)
-    update = reporter(progress, n, desc="multi-start", unit="start", auto=calls > 1)
+    fn = compiled_fit(objective, o, batched=False)
+    update = reporter(progress, n, desc="multi-start", unit="start", auto=n > STARTS_PER_CALL)
     outs = []
-    for c in range(calls):
-        rows = np.arange(c * per, (c + 1) * per)
-        rows = np.where(rows < n, rows, 0)
-        part = jax.tree.map(lambda a: a[rows], (y0, bargs))
-        outs.append(jax.tree.map(np.asarray, fn(*part, objective.optics)))
+    best_cost, best_steps = math.inf, 0
+    for i in range(n):
+        out = jax.tree.map(np.asarray, fn(y0[i], args, objective.optics, give_up_rule(best_cost, best_steps)))
+        cost = float(_cost(out))
+        if int(out.status) == CONVERGED and cost < best_cost:
+            best_cost, best_steps = cost, int(out.num_steps)
+        outs.append(out)
         if update is not None:
-            update(min((c + 1) * per, n))
-    return jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
+            update(i + 1)
+    return jax.tree.map(lambda *a: np.stack(a), *outs)
 
 
 def bound_note(method: str, names: list, settled: bool, finished: int = 0) -> str:
@@ -601,8 +746,11 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             other data with the same compiled solver.
         x0: optional physical starting vector ``(P,)`` (default: from the parameters / stack).
         starts: multi-start: number of starting points (the first is ``x0``, the others drawn by
-            :func:`multistart_points`), solved 16 at a time by one compiled, vmapped solve; the
-            converged one with the lowest χ² wins.
+            :func:`multistart_points`), solved one after the other by the fit's own compiled
+            solver (nothing more is compiled); with Levenberg–Marquardt a start still 10× above the
+            best cost after 3× that start's steps is given up (:func:`give_up_rule`, counted
+            in ``starts_abandoned``). The converged one with the lowest χ² wins (the first
+            of those equal to round-off: ``x0``'s when it found that minimum).
         max_steps, rtol, atol, gtol: stopping rules (:class:`SolverOptions`).
         scale_covariance: scale the covariance by the reduced χ² (σ estimated from the
             residuals); default: True unless every dataset gives σ.
@@ -626,24 +774,29 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
         raise LayerstackError(f"x0 must have {objective.n_parameters} values, got shape {x_start.shape}")
     pts = multistart_points(objective, starts, seed)
     pts[0] = x_start
-    y0 = jnp.asarray(starting_point(objective, o, pts))
-    bargs = jax.tree.map(lambda a: jnp.broadcast_to(a, (starts,) + a.shape), args)
+    y0 = np.asarray(starting_point(objective, o, pts))  # host: no eager device ops (each compiles once)
     if starts == 1:
         one = compiled_fit(objective, o, batched=False)(y0[0], args, objective.optics)
         outs = jax.tree.map(lambda a: np.asarray(a)[None], one)
     else:
-        outs = _multistart(objective, o, y0, bargs, progress)
+        outs = _multistart(objective, o, y0, args, progress)
+    # the fits' args with a leading axis of starts (host views: only read by settle_on_bounds)
+    bargs = jax.tree.map(lambda a: np.broadcast_to(np.asarray(a), (starts,) + a.shape), args)
     outs, settled, finished = settle_on_bounds(objective, o, outs, bargs)
-    n_starts_converged = None
+    n_starts_converged = n_abandoned = None
     best = 0
     if starts > 1:
         cost = sum(np.sum(r ** 2, axis=(-2, -1)) for r in outs.residuals) + np.sum(outs.penalty ** 2, axis=-1)
         ok = (outs.status == CONVERGED) & np.isfinite(cost)
         n_starts_converged = int(ok.sum())
-        best = int(np.argmin(np.where(ok if ok.any() else np.isfinite(cost), cost, np.inf)))
+        n_abandoned = int((outs.status == ABANDONED).sum())
+        pool = np.where(ok if ok.any() else np.isfinite(cost), cost, np.inf)
+        # the first start within round-off of the lowest cost (starts that found the same minimum
+        # differ by ~1e-13 in χ²: the objective's own start wins such a tie, as in a single fit)
+        best = int(np.argmax(pool <= np.min(pool) * (1.0 + TIE_RTOL))) if np.isfinite(np.min(pool)) else 0
     out = jax.tree.map(lambda a: a[best], outs)
     lo, hi = bound_contacts(out.x, objective.layout.lower, objective.layout.upper, objective.layout.scale)
     names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
-                        starts=starts, starts_converged=n_starts_converged,
+                        starts=starts, starts_converged=n_starts_converged, starts_abandoned=n_abandoned,
                         note=bound_note(method, names, bool(settled[best]), int(finished[best])))

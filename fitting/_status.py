@@ -3,16 +3,18 @@
 
 from __future__ import annotations
 
-__all__ = ["CONVERGED", "MAX_STEPS", "NONFINITE", "FAILED", "INVALID_DATA", "STATUS", "result_message"]
+__all__ = ["CONVERGED", "MAX_STEPS", "NONFINITE", "FAILED", "INVALID_DATA", "ABANDONED", "STATUS", "result_message"]
 
 #: Status codes of a fit (``FitResult.result_code``, ``BatchResult.result_code``).
-CONVERGED, MAX_STEPS, NONFINITE, FAILED, INVALID_DATA = 0, 1, 2, 3, 4
+CONVERGED, MAX_STEPS, NONFINITE, FAILED, INVALID_DATA, ABANDONED = 0, 1, 2, 3, 4, 5
 STATUS = {
     CONVERGED: "converged: the solver met its tolerance",
     MAX_STEPS: "not converged: the step limit (max_steps) was reached before the tolerance was met",
     NONFINITE: "failed: the model, the residuals or the Jacobian became NaN or infinite",
     FAILED: "failed: the solver could not make progress (singular or diverging linearised problem)",
     INVALID_DATA: "not fitted: invalid data (see the batch's invalid_data)",
+    ABANDONED: ("not converged: a multi-start start given up — after the give-up step count its cost was still far "
+                "above that of the best start converged before it (fitting._solve.give_up_rule)"),
 }
 
 

@@ -1,0 +1,129 @@
+"""What a fit compiles (issue 15): one program per model structure, reused.
+
+* The ψ/Δ datasets of an ideal ellipsometer are read by one :func:`layerstack_jax.ellipsometry`
+  over their angles (``Objective.predict``): the same numbers as each dataset's own
+  ``geometry.measure``, bit for bit, compiled.
+* ``fit`` compiles its solver once: a second fit of the same objective on new data, and a
+  multi-start (solved start after start by the same compiled solver), compile nothing.
+* The multi-start give-up rule (:func:`fitting._solve.give_up_rule`) ends hopeless starts; the
+  chosen start is the single fit's.
+
+Compilations are counted with JAX's own compile events (``jax.monitoring``), not timed.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import fitting as ft
+import layerstack_jax as ls
+from fitting import _solve
+from fitting._status import ABANDONED, STATUS
+
+WL = np.linspace(400.0, 800.0, 60)
+ANGLES = (60.0, 70.0)
+TRUTH = (120.0, 1.55, 0.008)  # film thickness nm, Cauchy A, B (µm²)
+SIGMA = 0.02
+
+_COMPILES = {"on": False, "n": 0}
+
+
+def _count(event, duration, **kw):
+    if _COMPILES["on"] and event == "/jax/core/compile/backend_compile_duration":
+        _COMPILES["n"] += 1
+
+
+jax.monitoring.register_event_duration_secs_listener(_count)
+
+
+def compiles(f, *args, **kwargs):
+    """``(f(...), number of XLA compilations it made)``."""
+    _COMPILES.update(on=True, n=0)
+    try:
+        out = f(*args, **kwargs)
+    finally:
+        _COMPILES["on"] = False
+    return out, _COMPILES["n"]
+
+
+def _stack(d, A, B):
+    film = ls.Layer(ls.Cauchy(A, B), d, name="film")
+    oxide = ls.Layer(1.46, 2.0, name="oxide")
+    return ls.Stack(1.0, [film, oxide], ls.Substrate(complex(3.9, 0.02)))
+
+
+def _data(seed):
+    rng = np.random.default_rng(seed)
+    e = ls.ellipsometry(_stack(*TRUTH), WL, np.asarray(ANGLES))
+    psi = np.asarray(e.psi_deg) + SIGMA * rng.standard_normal((len(ANGLES), WL.size))
+    delta = np.asarray(e.delta_deg) + SIGMA * rng.standard_normal((len(ANGLES), WL.size))
+    return [a[None] for i in range(len(ANGLES)) for a in (psi[i], delta[i])]
+
+
+@pytest.fixture(scope="module")
+def objective():
+    data = _data(0)
+    datasets = [ft.Dataset(ls.Ellipsometric(a, q), data[2 * i + k], sigma=SIGMA)
+                for i, a in enumerate(ANGLES) for k, q in enumerate(("psi", "delta"))]
+    params = [ft.thickness("film", lower=20.0, upper=300.0), ft.dispersion("film", "A"), ft.dispersion("film", "B")]
+    return ft.Objective(_stack(100.0, 1.50, 0.005), WL, datasets, params)
+
+
+def test_shared_ellipsometer_reading_equals_each_geometry():
+    """Ideal ellipsometer datasets at repeated and distinct angles, every quantity: the shared
+    reading of ``predict`` equals each dataset's own ``measure``, compiled, bit for bit — values
+    and forward-mode Jacobian."""
+    quantities = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im", "depolarization")
+    geoms = [ls.Ellipsometric(a, q) for a in (55.0, 70.0) for q in quantities] + [ls.Ellipsometric(62.5, "psi")]
+    zeros = np.zeros((1, WL.size))
+    obj = ft.Objective(_stack(*TRUTH), WL, [ft.Dataset(g, zeros) for g in geoms],
+                       [ft.thickness("film"), ft.dispersion("film", "A"), ft.dispersion("film", "B")])
+    x = jnp.asarray([118.0, 1.56, 0.0075])
+
+    def own(v):
+        st = obj.stack_for(v)
+        return jnp.concatenate([g.measure(st, WL).ravel() for g in geoms])
+
+    def shared(v):
+        return jnp.concatenate([m.ravel() for m in obj.predict(v)])
+
+    np.testing.assert_array_equal(np.asarray(jax.jit(shared)(x)), np.asarray(jax.jit(own)(x)))
+    np.testing.assert_array_equal(np.asarray(jax.jit(jax.jacfwd(shared))(x)), np.asarray(jax.jit(jax.jacfwd(own))(x)))
+
+
+def test_second_fit_and_multistart_compile_nothing(objective):
+    first, n_first = compiles(ft.fit, objective)
+    assert first.converged and n_first >= 1
+    # a further fit of the same structure on new data: the cached solver, nothing compiled
+    again, n_again = compiles(ft.fit, objective, data=_data(1))
+    assert again.converged and n_again == 0, n_again
+    assert np.all(np.abs(again.x - np.asarray(TRUTH)) < 5 * again.x_stderr)
+    # a multi-start: the same compiled solver, start after start
+    multi, n_multi = compiles(ft.fit, objective, starts=6, seed=3, progress=False)
+    assert n_multi == 0, n_multi
+    assert multi.starts == 6 and multi.starts_converged >= 1
+    # the objective's own start found the minimum: it is the one reported, as by the single fit
+    np.testing.assert_allclose(multi.x, first.x, rtol=1e-12)
+    assert multi.num_steps == first.num_steps and multi.report().count("multi-start") == 1
+
+
+def test_give_up_rule_and_abandoned_starts(objective):
+    assert _solve.give_up_rule(np.inf, 0) == _solve.NEVER
+    assert _solve.give_up_rule(50.0, 11) == (33, 500.0)
+    assert _solve.give_up_rule(50.0, 4) == (_solve.GIVE_UP_MIN_STEPS, 500.0)
+    assert ABANDONED in STATUS and "given up" in STATUS[ABANDONED]
+    o = _solve.SolverOptions("lm", max_steps=256)
+    fn = _solve.compiled_fit(objective, o, batched=False)
+    y0 = _solve.starting_point(objective, o, objective.layout.x0)
+    plain = fn(y0, objective.args(), objective.optics)
+    cost = float(_solve._cost(jax.tree.map(np.asarray, plain)))
+    # a rule that cannot fire leaves the fit as it was; one whose cost limit lies below the
+    # optimum ends the solve at its step count, marked abandoned
+    same = fn(y0, objective.args(), objective.optics, (1000, 10.0 * cost))
+    np.testing.assert_array_equal(np.asarray(same.x), np.asarray(plain.x))
+    assert int(same.status) == int(plain.status) == 0
+    cut = fn(y0, objective.args(), objective.optics, (3, 0.5 * cost))
+    assert int(cut.status) == ABANDONED and int(cut.num_steps) == 3

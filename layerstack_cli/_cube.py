@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError
-from layerstack_jax.io import parse_wavelengths
+from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
 
 from ._common import PROG, _positive_int, _precision, _resolve_geometry
 
@@ -318,6 +318,7 @@ def _cmd_fit_cube(args) -> int:
         import fitting
 
         stack, params = fitting.load_fit_parameters(args.model)
+        geometry = instrument_geometry(geometry, load_instrument(args.model))
         if not params:
             raise LayerstackError(f"{args.model}: no free parameter (mark one with {{ value = ..., free = true }})")
         if any(p.per_sample for p in params):

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError
-from layerstack_jax.io import parse_wavelengths
+from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
 
 from ._common import PROG, _positive_int, _precision, _resolve_geometry
 
@@ -184,6 +185,8 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
 
         stack, params = fitting.load_fit_parameters(args.stack)
         datasets, label, origin = _measurement_datasets(m, args)
+        settings = load_instrument(args.stack)  # the stack file's [instrument]: offsets, bandwidth …
+        datasets = [dataclasses.replace(d, geometry=instrument_geometry(d.geometry, settings)) for d in datasets]
         if args.wavelengths is not None:
             datasets = [fitting.Dataset(d.geometry, d.data, sigma=d.sigma, mask=d.mask, name=d.name,
                                         wavelength_nm=np.asarray(m.wavelength_nm, float)) for d in datasets]
@@ -242,6 +245,7 @@ def _cmd_fit(args) -> int:
                                                   source=args.data, origin="from the data's column names",
                                                   silent="the column names do not say")
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
+    geometry = instrument_geometry(geometry, load_instrument(args.stack))
     with _precision(args.float32):
         import fitting
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, ellipsometry, reflectance
-from layerstack_jax.io import load_stack, parse_values, parse_wavelengths, save_spectra_csv
+from layerstack_jax.io import (instrument_geometry, load_instrument, load_stack, parse_values, parse_wavelengths,
+                               save_spectra_csv)
 
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _precision
 
@@ -214,6 +215,8 @@ def _cmd_predict(args) -> int:
     requested = _parse_geometries(args.geometry)
     with _precision(args.float32):
         stack = load_stack(args.stack)
+        settings = load_instrument(args.stack)  # the stack file's [instrument], if any
+        requested = [(name, instrument_geometry(g, settings)) for name, g in requested]
         try:
             check_stack(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
         except LayerstackError as e:

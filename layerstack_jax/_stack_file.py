@@ -24,10 +24,12 @@ from ._spectra_csv import read_csv_columns
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
 from ._validate import LayerstackError, is_concrete
 
-__all__ = ["FREE_KEYS", "FreeDeclaration", "read_material", "stack_from_dict", "load_stack", "load_fit_stack",
-           "stack_to_dict", "save_stack"]
+__all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
+           "load_fit_stack", "load_instrument", "instrument_geometry", "stack_to_dict", "save_stack"]
 
-_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background")
+_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "instrument")
+#: keys of ``[instrument]`` that are not numbers: which layer a thickness spread applies to
+_INSTRUMENT_STATIC = ("nonuniform_layer",)
 _LAYER_KEYS = ("name", "n", "k", "thickness_nm", "coherent", "alpha_per_nm")
 _SUBSTRATE_KEYS = ("n", "k")
 _BACKGROUND_KEYS = ("n", "rho_g")
@@ -480,6 +482,8 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
             spec = _split_free(where, "rho_g", bg["rho_g"], ("exit", "reflectance"), "rho_g", free, spectral=True)
             rho = _spectrum(where, "rho_g", spec, base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
             exit_ = LambertianBackground(index, rho)
+        if "instrument" in d:  # checked here (every loader refuses a bad table); applied by the caller
+            _instrument_settings(source, _table("instrument"), free, [layer.name for layer in layers])
         return Stack(ambient=ambient, layers=layers, exit=exit_)
     except LayerstackError as e:
         msg = str(e)
@@ -487,6 +491,74 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
             raise
         raise LayerstackError(f"{source}: {msg}") from None
 
+
+
+# ------------------------------------------------------------------------------ the instrument
+class InstrumentSettings(NamedTuple):
+    """The ``[instrument]`` table of a stack file (schema: :mod:`layerstack_jax.io`, "The
+    instrument"): fields of the measurement geometries of a fit or a prediction.
+
+    Attributes:
+        values: field name → number, in the geometry field's unit (``angle_offset_deg`` in
+            degrees, ``bandwidth_nm`` in nm, ``thickness_spread`` dimensionless …).
+        static: field name → value of the non-numeric fields (``nonuniform_layer``: a layer's
+            name or 0-based position).
+        where: ``"<file>: [instrument]"`` for messages.
+    """
+
+    values: dict
+    static: dict
+    where: str
+
+
+def _instrument_settings(source: str, table: Mapping, free: Optional[list], layer_names: list) -> InstrumentSettings:
+    """Read an ``[instrument]`` table: each key a number or a free-parameter table (declared as
+    ``("datasets", "all", key)``: one value shared by every dataset whose geometry has the field)."""
+    where = FileLocation(source, "[instrument]")
+    values, static = {}, {}
+    for key, spec in table.items():
+        if key in _INSTRUMENT_STATIC:
+            if not (isinstance(spec, str) or (isinstance(spec, int) and not isinstance(spec, bool))):
+                raise where.error(f"must be a layer's name or 0-based position, got {spec!r}", key)
+            if isinstance(spec, str) and spec not in layer_names:
+                raise where.error(f"no layer named {spec!r} (layers: {layer_names})", key)
+            if isinstance(spec, int) and not 0 <= spec < len(layer_names):
+                raise where.error(f"the stack has {len(layer_names)} layer(s), no layer {spec}", key)
+            static[key] = spec
+            continue
+        if isinstance(spec, dict) and not any(k in spec for k in FREE_KEYS):
+            raise where.error(f"a number or {{ value = ..., free = true, min = ..., max = ... }}, got {spec!r}", key)
+        plain = _split_free(where, key, spec, ("datasets", "all", key), "other", free, spectral=False)
+        values[key] = read_number(where, key, plain)
+    return InstrumentSettings(values, static, f"{source}: [instrument]")
+
+
+def load_instrument(path) -> InstrumentSettings:
+    """The ``[instrument]`` table of a stack file (empty settings when it has none), checked like
+    the rest of the file; apply it to a geometry with :func:`instrument_geometry`."""
+    path = Path(path)
+    d = read_toml(path)
+    table = d.get("instrument", {}) if isinstance(d, Mapping) else {}
+    if not isinstance(table, Mapping):
+        raise LayerstackError(f"{path}: instrument: must be a table [instrument], got {table!r}")
+    names = [t.get("name") if isinstance(t, Mapping) else None for t in d.get("layers", [])]
+    names = [n if isinstance(n, str) else f"layer {i + 1}" for i, n in enumerate(names)]
+    return _instrument_settings(str(path), table, None, names)
+
+
+def instrument_geometry(geometry, settings: InstrumentSettings):
+    """``geometry`` with the fields of ``settings`` set (each must be a field of it: a key that
+    is not, e.g. ``bandwidth_nm`` for a sphere, is a :class:`LayerstackError` naming the key, the
+    geometry and its fields). Returns the geometry unchanged for empty settings."""
+    given = {**settings.values, **settings.static}
+    if not given:
+        return geometry
+    fields = [f.name for f in dataclasses.fields(geometry)]
+    for key in given:
+        if key not in fields:
+            raise LayerstackError(f"{settings.where}: {key}: not a field of the geometry {geometry.label!r} "
+                                  f"({type(geometry).__name__}; its fields: {', '.join(fields)})")
+    return dataclasses.replace(geometry, **given)
 
 
 def load_fit_stack(path) -> tuple[Stack, list[FreeDeclaration]]:

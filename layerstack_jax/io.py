@@ -87,6 +87,28 @@ list by its 1-based position, ``sellmeier.B1[glass]``, ``lorentz.A2[film]``,
 ``bruggeman.materials1.cauchy.A[rough]``. Bounds: give them, except for fractions (default and
 limit [0, 1]); a fraction list's sum ≤ 1 is not a bound, keep the start well inside.
 
+The instrument
+--------------
+An optional ``[instrument]`` table sets fields of the measurement geometries that
+``layerstack fit`` and ``layerstack predict`` use with the stack (the geometry of a fit comes
+from the instrument file or ``-g``; these are its non-idealities), in the field's unit, each a
+number or a free-parameter table::
+
+    [instrument]
+    angle_offset_deg = { value = 0.0, free = true, min = -1.0, max = 1.0 }   # one for all angles
+    bandwidth_nm = 2.0                                                       # monochromator FWHM
+    thickness_spread = { value = 0.01, free = true, min = 0.0, max = 0.1 }
+    nonuniform_layer = "film"          # the layer whose thickness spreads (name or 0-based position)
+
+Any numeric field of the geometry is accepted — an ellipsometer's (:class:`~layerstack_jax.Ellipsometric`)
+``angle_offset_deg``, ``bandwidth_nm``, ``thickness_spread``; a spectrophotometer's fields
+(:class:`~layerstack_jax.Sphere`, :class:`~layerstack_jax.Directional`) such as its port cone or
+apertures — and a key that is not a field of the geometry is an error naming it and the
+geometry's fields. A free key is fitted as one value shared by every dataset of the fit whose
+geometry has the field (``fitting.instrument(key, "all")``), named by the key
+(``angle_offset_deg``). :func:`load_instrument` reads the table into :class:`InstrumentSettings`;
+:func:`instrument_geometry` applies it to a geometry.
+
 Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
 an error. Relative file names are taken relative to the directory of the TOML file.
 
@@ -158,7 +180,10 @@ from ._spectra_csv import read_spectra_csv as read_spectra_csv
 from ._spectra_csv import save_spectra_csv as save_spectra_csv
 from ._stack_file import FREE_KEYS as FREE_KEYS
 from ._stack_file import FreeDeclaration as FreeDeclaration
+from ._stack_file import InstrumentSettings as InstrumentSettings
+from ._stack_file import instrument_geometry as instrument_geometry
 from ._stack_file import load_fit_stack as load_fit_stack
+from ._stack_file import load_instrument as load_instrument
 from ._stack_file import load_stack as load_stack
 from ._stack_file import read_material as read_material
 from ._stack_file import save_stack as save_stack
@@ -172,6 +197,9 @@ __all__ = [
     "stack_to_dict",
     "save_stack",
     "FreeDeclaration",
+    "InstrumentSettings",
+    "load_instrument",
+    "instrument_geometry",
     "read_csv_columns",
     "read_spectra_csv",
     "save_spectra_csv",

@@ -267,6 +267,26 @@ def _cone_mean(T_k, axis_deg, half_angle_deg, nodes: int):
     return jnp.sum(c[..., None] * T_k, axis=-2)
 
 
+def _stale_optics(what: str) -> LayerstackError:
+    return LayerstackError(f"optics were made for {what}: rebuild them with fixed_optics() for this geometry")
+
+
+def _aperture_mean(T, axis_deg, half_angle_deg, nodes: int):
+    """``T`` from :class:`Optics` at a point (``half_angle_deg`` None: returned as is) or at the
+    :func:`cone_rule` directions (averaged by :func:`_cone_mean`), after checking that the
+    optics were made that way: a cone adds an axis of K = 2 nodes² directions before the
+    wavelengths (leading batch axes of the stack's leaves may come in front of either)."""
+    K = 2 * nodes * nodes
+    has_cone_axis = T.ndim >= np.ndim(axis_deg) + 2 and T.shape[-2] == K
+    if half_angle_deg is None:
+        if has_cone_axis:
+            raise _stale_optics("an aperture (a cone of directions), this geometry reads a point")
+        return T
+    if not has_cone_axis:
+        raise _stale_optics("a point or another number of cone_nodes, this geometry reads an aperture")
+    return _cone_mean(T, axis_deg, half_angle_deg, nodes)
+
+
 def _port_escape(rs: ResolvedStack, T_k, axis_deg, half_angle_deg, nodes: int):
     r"""The part of the back-side diffuse transmittance :math:`t_b` that leaves into the specular
     port's cone (half-angle β about the specular direction θ_0), ``(*angle, wl)``:
@@ -432,6 +452,8 @@ class Sphere(Geometry):
             d, rho = _diffuse_back(rs, o), rs.rho_g
             escape = d.t
             if self._has_port():  # the diffuse light leaving into the port's cone is lost
+                if o.viewing is None:
+                    raise _stale_optics("a sphere without a port cone")
                 T_k = natural(join_interfaces(rs, o.viewing, both_sides=False).T_front)
                 escape = d.t - _port_escape(rs, T_k, *self._port(), self.cone_nodes)
             total = escape * rho * natural(front.T_front) / (1.0 - rho * d.r)
@@ -597,10 +619,8 @@ class Directional(Geometry):
         (ti, bi), (tv, bv) = self._apertures()
         front = natural(join_interfaces(rs, o.incidence, both_sides=False).T_front)
         view = natural(join_interfaces(rs, o.viewing, both_sides=False).T_front)
-        if bi is not None:
-            front = _cone_mean(front, ti, bi, self.cone_nodes)
-        if bv is not None:
-            view = _cone_mean(view, tv, bv, self.cone_nodes)
+        front = _aperture_mean(front, ti, bi, self.cone_nodes)
+        view = _aperture_mean(view, tv, bv, self.cone_nodes)
         d, rho = _diffuse_back(rs, o), rs.rho_g
         # Simonot eqs. 77, 79: (n0/n_g)² T(θ0) T(θ0') ρg / (1 − ρg r_b)
         ratio = exit_medium_ratio(rs.n[0], rs.n[-1])

@@ -1,4 +1,5 @@
-r"""Ellipsometry of coherent stacks: ψ and Δ as ellipsometers report them.
+r"""Ellipsometry: ψ and Δ as ellipsometers report them — of coherent stacks, of thick substrates
+with their incoherent backside reflection, in reflection and in transmission.
 
 An ellipsometer measures the change of polarization state on specular reflection, i.e. the
 ratio of the complex amplitude reflection coefficients of the stack for p and s light,
@@ -110,6 +111,69 @@ P = 1; depolarization as a fraction, not in %). The ``'N'``, ``'C'``, ``'S'`` qu
 read :math:`\bar N, \bar C, \bar S` themselves; ``'rho_re'``, ``'rho_im'`` read
 :math:`\tan\psi\, e^{-i\Delta}` of the reported ψ, Δ. All three parameters are pytree
 leaves of the geometry: differentiable and fittable (``fitting.instrument``).
+
+Thick substrates: the incoherent backside reflection
+----------------------------------------------------
+A glass slide or wafer is declared as usual: coherent films, then ``Layer(n_glass, thickness,
+coherent=False)``, then the medium behind it (``Substrate(1.0)`` for air). Light returned from the
+backside reaches the detector as a train of beams m = 0, 1, 2, … — the front reflection, then
+the beams that crossed the slab 2m times — whose mutual phases are lost (the slab is much
+thicker than the coherence length), so they add in intensity: the instrument reads the
+*incoherent sum* of their Mueller matrices, partially depolarized. For each beam the s and p
+components travel the same path (the normal wavevector does not depend on polarization), so
+their correlation :math:`X = \langle a_p \bar a_s\rangle` survives and composes through the slab
+by the same adding rule as the intensities (:mod:`layerstack_jax._polarimetry`,
+:func:`~layerstack_jax._polarimetry.front_correlations`; Simonot eqs. 51, 53 with
+:math:`R \to X`):
+
+.. math::
+    X = r^A_p \bar r^A_s + \frac{(t^A_p t'^A_p)\,\overline{(t^A_s t'^A_s)}\; r^B_p \bar r^B_s\; t^2}
+        {1 - r'^A_p \bar r'^A_s\, r^B_p \bar r^B_s\, t^2}
+        = \sum_{m \ge 0} a_{p,m} \bar a_{s,m},
+
+(A the front packet, B the back one, primes from inside the slab, t the slab's single-pass
+intensity attenuation of :func:`layerstack_jax._incoherent.beer_attenuation`) and likewise
+:math:`R_s, R_p` with :math:`|\cdot|^2`. The reading (:func:`stack_ncs`, :func:`correlation_ncs`):
+
+.. math::
+    N = \frac{R_s - R_p}{R_s + R_p},\qquad C = \frac{2\operatorname{Re}X}{R_s + R_p},\qquad
+    S = -\frac{2\operatorname{Im}X}{R_s + R_p},
+
+the normalized Mueller matrix :math:`[[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]]`
+of :func:`~layerstack_jax.specular_mueller`, reported as above:
+:math:`\psi = \tfrac12\operatorname{atan2}(\sqrt{C^2+S^2}, N)`,
+:math:`\Delta = \operatorname{atan2}(S, C)` (the instruments' Δ: for a single beam these are
+:func:`psi_delta`'s), depolarization :math:`1 - \sqrt{N^2+C^2+S^2} \in [0, 1]`. It is 0 where
+only one beam returns — the back index-matched (a taped backside, ``Substrate(n_glass)``), an
+opaque slab — and at normal incidence (every beam has :math:`a_p = -a_s`); it grows with the
+backside's share of the light, e.g. towards Brewster's angle of the front face. Such a stack is
+read by :class:`Ellipsometric` (``reading``, ``measure``: every quantity, every non-ideality on
+top — the bandwidth and thickness averages of N, C, S above apply to the incoherent sums as they
+are); :func:`ellipsometry` keeps its ratio :math:`\rho = r_p/r_s`, defined for coherent stacks
+only, and refuses. Checked against a beam-by-beam numpy summation of the Mueller matrices
+(tests/test_ellipsometry_backside.py, ≤ 1e-10). A purely coherent stack still takes the
+amplitude path (bit-identical to :func:`ellipsometry`): the branch is on the static stack
+structure.
+
+Transmission ellipsometry
+-------------------------
+``Ellipsometric(angle, quantity, mode="transmission")`` reads the beam transmitted into the
+exit medium (which must be transparent: k = 0, a :class:`~layerstack_jax.Substrate`):
+
+.. math::
+    \rho_t = \frac{t_p}{t_s} = \tan\psi_t\, e^{-i\Delta_t},\qquad
+    \Delta_t = -\arg(t_p/t_s) = \arg(t_s \bar t_p),
+
+with the field amplitudes :math:`t_s, t_p` of ``tmm`` (Born & Wolf: one interface has
+:math:`t_s = 2q_i/(q_i + q_f)`, :math:`t_p = 2 n_i n_f q_i/(n_f^2 q_i + n_i^2 q_f)`) and the same
+Δ sign as in reflection; N, C, S, ``rho_re``, ``rho_im``, depolarization as above with
+:math:`t` for :math:`r`. At normal incidence :math:`t_p = t_s`: ψ_t = 45°, Δ_t = 0. One
+interface between transparent media gives a real
+:math:`t_p/t_s = (n_i\cos\theta_i + n_f\cos\theta_f)/(n_f\cos\theta_i + n_i\cos\theta_f) \ge 1`:
+Δ_t = 0, ψ_t ≥ 45°. Thick layers in the path (a slab between films) are summed incoherently as
+in reflection (:math:`T_s, T_p`, :math:`X_t = \langle t_p \bar t_s\rangle` of the adding rule).
+Spelled ``ellipsometry:ANGLE:QUANTITY:transmission`` on the command line and in files
+(:meth:`Ellipsometric.parse`).
 """
 
 from __future__ import annotations
@@ -287,6 +351,10 @@ def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsomet
     A pure, jit-, vmap- and grad-compatible function of the stack's leaves (thicknesses, n, k):
     differentiate ``psi_deg``, ``delta_deg`` or (better, wrap-free) ``rho``, ``N``, ``C``, ``S``
     with respect to any of them.
+
+    A stack with thick incoherent layers (a transparent substrate with its backside) has no
+    single ratio :math:`r_p/r_s` and is refused: read it with :class:`Ellipsometric` (module
+    docstring, "Thick substrates").
 
     Args:
         stack: ambient (real index) · coherent films · exit medium.
@@ -496,6 +564,13 @@ class Ellipsometric(Geometry):
       that every Gauss–Hermite node thickness stays positive);
     * ``average_nodes`` (static): Gauss–Hermite nodes per averaged variable (default 21;
       accuracy in the module docstring).
+
+    ``mode`` (static): ``'reflection'`` (default) or ``'transmission'`` — ψ_t, Δ_t of
+    :math:`t_p/t_s` (module docstring, "Transmission ellipsometry").
+
+    Any stack: a stack with thick incoherent layers (a transparent substrate slab and its
+    backside) is read as the depolarized incoherent sum of its beams (module docstring, "Thick
+    substrates"); a coherent one through its amplitudes.
     """
 
     angle_deg: RealLike = 70.0

@@ -13,7 +13,8 @@ Public entry points built on the interface:
 * :func:`fixed_optics` — the part of it that fits of thick layers reuse;
 * :func:`invert_background` — intrinsic background reflectance ρg from a measurement;
 * :func:`parse_geometry` — ``"sphere:8:sce"``, ``"45/0"``, ``"brdf:45:0"``, ``"specular:30"``,
-  ``"ellipsometry:70:psi"`` … into a geometry.
+  ``"ellipsometry:70:psi"`` … into a geometry (options of the instrument as built, e.g.
+  ``"sphere:8:sce:cone=5"``, ``"45/0:illum=2:view=4"``: :mod:`layerstack_jax._instrument`).
 
 Angles are degrees in [0, 90) everywhere at this surface; wavelengths in nm.
 """
@@ -826,8 +827,10 @@ def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int =
     :math:`r_b, t_b` its diffuse reflectance and transmittance from the background side:
 
     * :class:`Sphere`: :math:`t_b\,\rho_g T(\theta_0)/(1-\rho_g r_b)` (eqs. 69, 78), plus
-      :math:`R(\theta_0)` when the specular component is included;
-    * :class:`Directional`: :math:`(n_0/n_g)^2 T(\theta_0) T(\theta_0')\rho_g/(1-\rho_g r_b)` (eqs. 77, 79);
+      :math:`R(\theta_0)` when the specular component is included (a specular port's cone, the
+      sphere multiplier of wall and ports, a cover glass: fields of :class:`Sphere`);
+    * :class:`Directional`: :math:`(n_0/n_g)^2 T(\theta_0) T(\theta_0')\rho_g/(1-\rho_g r_b)` (eqs. 77, 79;
+      finite apertures and a cover glass: fields of :class:`Directional`);
     * :class:`BRDF`: the above divided by π (eq. 76);
     * :class:`Specular`: R, T or A of the stack at the angle;
     * any other :class:`Geometry`: its :meth:`~Geometry.measure`.

@@ -215,6 +215,7 @@ def test_sphere_multiplier_matches_closed_form(spec):
     want = _substitution_closed_form(ST, ideal, 0.97, 0.03, 0.02, 0.99)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
     assert np.all(np.abs(got - ideal) > 1e-3)  # a dark sample against a white standard reads low
+    np.testing.assert_allclose(ls.invert_background(ST, WL, got, g, nodes=NODES), 0.7, rtol=0, atol=1e-12)
     zero = ls.Sphere(8.0, spec, wall_reflectance=0.97, sample_port_fraction=0.0, open_port_fraction=0.02)
     np.testing.assert_allclose(zero.measure(ST, WL, nodes=NODES), ideal, rtol=1e-15, atol=0)
     # spectra: the wall given on the grid, the reference defaulting to the wall

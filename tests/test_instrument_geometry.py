@@ -379,3 +379,20 @@ def test_fit_recovers_cover_index():
     res = ft.fit(obj)
     assert res.converged
     assert res.values["cover_index"] == pytest.approx(1.52, rel=1e-4)
+
+
+def test_optics_of_another_aperture_or_port_are_refused():
+    """fixed_optics made for the ideal instrument are not silently reused by one with a cone
+    (nor the other way round): a LayerstackError says to rebuild them."""
+    ideal = ls.fixed_optics(VARNISH, WL, ls.Directional(45.0, 0.0), nodes=NODES)
+    with pytest.raises(ls.LayerstackError, match="rebuild"):
+        ls.reflectance(VARNISH, WL, ls.Directional(45.0, 0.0, 2.0, 0.0), nodes=NODES, optics=ideal)
+    coned = ls.fixed_optics(VARNISH, WL, ls.Directional(45.0, 0.0, 0.0, 3.0), nodes=NODES)
+    with pytest.raises(ls.LayerstackError, match="rebuild"):
+        ls.reflectance(VARNISH, WL, ls.Directional(45.0, 0.0), nodes=NODES, optics=coned)
+    np.testing.assert_allclose(ls.reflectance(VARNISH, WL, ls.Directional(45.0, 0.0, 0.0, 3.0), nodes=NODES,
+                                              optics=coned),
+                               ls.Directional(45.0, 0.0, 0.0, 3.0).measure(VARNISH, WL, nodes=NODES), rtol=1e-15)
+    plain = ls.fixed_optics(VARNISH, WL, ls.Sphere(8.0), nodes=NODES)
+    with pytest.raises(ls.LayerstackError, match="rebuild"):
+        ls.reflectance(VARNISH, WL, ls.Sphere(8.0, port_half_angle_deg=5.0), nodes=NODES, optics=plain)

@@ -195,7 +195,7 @@ from ._illumination import snell_invariant
 from ._numerics import abs2, safe_abs, safe_atan2, safe_divide, safe_sqrt
 from ._polarimetry import front_correlations
 from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
-from ._validate import LayerstackError, check_angle_deg, check_finite, check_nonnegative, is_concrete
+from ._validate import LayerstackError, check, check_angle_deg, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["Ellipsometry", "EllipsometerReading", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
 
@@ -301,15 +301,16 @@ def _amplitudes_resolved(rs: ResolvedStack, angle_rad):
     return jnp.broadcast_to(gamma[0], shape), jnp.broadcast_to(gamma[1], shape)
 
 
-def _check_transmission(stack: Stack, rs: ResolvedStack) -> None:
-    """Transmission ellipsometry reads the beam leaving into a transparent specular exit medium."""
+def _check_transmission(stack: Stack, rs: ResolvedStack) -> ResolvedStack:
+    """Transmission ellipsometry reads the beam leaving into a transparent specular exit medium:
+    ``rs`` with its exit index checked (k = 0; eagerly, or by ``equinox.error_if`` when traced)."""
     if isinstance(stack.exit, LambertianBackground):
         raise LayerstackError("exit: transmission ellipsometry reads the beam transmitted into a specular exit "
                               "medium (a Substrate), not into a LambertianBackground")
-    k = jnp.imag(rs.n[-1])
-    if is_concrete(k) and np.any(np.asarray(k) != 0):
-        raise LayerstackError("exit index: transmission ellipsometry needs a transparent exit medium (k = 0), "
-                              "where the transmitted beam reaches the analyser")
+    n_exit = check("exit index", rs.n[-1], lambda a, xp: xp.imag(a) != 0,
+                   "must be transparent (k = 0) for transmission ellipsometry: the transmitted beam reaches the "
+                   "analyser through it")
+    return rs._replace(n=(*rs.n[:-1], n_exit))
 
 
 def transmission_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
@@ -319,8 +320,7 @@ def transmission_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
     ``(*angle, wl)``."""
     _check_coherent(stack)
     check_angle_deg("angle_deg", angle_deg)
-    rs = resolve(stack, wavelength_nm)
-    _check_transmission(stack, rs)
+    rs = _check_transmission(stack, resolve(stack, wavelength_nm))
     s = snell_invariant(rs.n[0], jnp.deg2rad(angle_deg))
     _, tau, _ = packet_amplitudes(rs.n, rs.d, s, rs.wavelength)
     shape = jnp.broadcast_shapes(tau.shape[1:], jnp.shape(s)[:-1] + (rs.wavelength.shape[-1],))
@@ -455,7 +455,7 @@ def stack_ncs(stack: Stack, wavelength_nm, angle_deg, mode: str = "reflection"):
     check_angle_deg("angle_deg", angle_deg)
     rs = resolve(stack, wavelength_nm)
     if mode == "transmission":
-        _check_transmission(stack, rs)
+        rs = _check_transmission(stack, rs)
     th = jnp.deg2rad(jnp.asarray(angle_deg, dtype=float))
     s = snell_invariant(rs.n[0], th)
     c = front_correlations(rs, s)

@@ -121,8 +121,13 @@ def test_spelling_label_and_refusals():
     with pytest.raises(ls.LayerstackError, match="mode"):
         ls.Ellipsometric(30.0, "psi", mode="both")
     g = ls.Ellipsometric(30.0, "psi", mode="transmission")
-    with pytest.raises(ls.LayerstackError, match="transparent exit"):
+    with pytest.raises(ls.LayerstackError, match="exit index must be transparent"):
         g.measure(ls.Stack(1.0, [ls.Layer(1.5, 100.0)], ls.Substrate(3.9 + 0.02j)), WL)
+    with pytest.raises(Exception, match="exit index must be transparent"):  # traced: equinox.error_if at run time
+        jax.jit(lambda k: g.measure(ls.Stack(1.0, [ls.Layer(1.5, 100.0)], ls.Substrate(ls.Index(3.9, k))), WL))(0.02)
+    slab = ls.Stack(1.0, [ls.Layer(1.5, 1e5, coherent=False)], ls.Substrate(3.9 + 0.02j))
+    with pytest.raises(ls.LayerstackError, match="exit index must be transparent"):
+        g.measure(slab, WL)
     with pytest.raises(ls.LayerstackError, match="LambertianBackground"):
         g.measure(ls.Stack(1.0, [ls.Layer(1.5, 100.0)], ls.LambertianBackground(1.5, 0.8)), WL)
 

@@ -663,20 +663,48 @@ class BRDF(Geometry):
 
     Angles in degrees from the normal, in [0, 90), scalars or arrays broadcastable to a common
     ``(*angle)`` that adds leading axes to the :func:`reflectance` output ``(*angle, wl)``.
+
+    The instrument as built: finite apertures (``illumination_half_angle_deg``,
+    ``viewing_half_angle_deg``) and a cover glass (``cover_*``), as for :class:`Directional`
+    (the reading is its reading divided by π); ideal by default. CLI: ``brdf:45:0:illum=2:view=4``.
     """
 
     incidence_deg: RealLike = 45.0
     viewing_deg: RealLike = 0.0
+    illumination_half_angle_deg: RealLike = 0.0
+    viewing_half_angle_deg: RealLike = 0.0
+    cover_index: Optional[RealSpectrumLike] = None
+    cover_thickness_nm: RealLike = 1.0e6
+    cover_alpha_per_nm: RealLike = 0.0
+    cover_contact: bool = eqx.field(static=True, default=False)
+    cone_nodes: int = eqx.field(static=True, default=DEFAULT_CONE_NODES)
 
-    spelling: ClassVar[str] = "brdf:I:V"
+    spelling: ClassVar[str] = "brdf:I:V[:illum=DEG][:view=DEG][:cover=N]"
     reading_is_fraction: ClassVar[bool] = False  # 1/sr
 
     def __check_init__(self):
         check_angle_deg("BRDF.incidence_deg", self.incidence_deg)
         check_angle_deg("BRDF.viewing_deg", self.viewing_deg)
+        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
+            if not _is_zero(getattr(self, half)):
+                check_cone(f"BRDF.{half} (degrees)", getattr(self, axis), getattr(self, half))
+        _check_cover("BRDF", self)
 
     def _factor(self) -> Directional:
-        return Directional(self.incidence_deg, self.viewing_deg)
+        if _is_zero(self.illumination_half_angle_deg) and _is_zero(self.viewing_half_angle_deg) \
+                and self.cover_index is None and self.cone_nodes == DEFAULT_CONE_NODES:
+            return Directional(self.incidence_deg, self.viewing_deg)
+        return Directional(self.incidence_deg, self.viewing_deg, self.illumination_half_angle_deg,
+                           self.viewing_half_angle_deg, self.cover_index, self.cover_thickness_nm,
+                           self.cover_alpha_per_nm, self.cover_contact, self.cone_nodes)
+
+    def _seen(self, rs):
+        return _covered(self, rs)
+
+    @property
+    def _ideal(self) -> bool:
+        return (_is_zero(self.illumination_half_angle_deg) and _is_zero(self.viewing_half_angle_deg)
+                and self.cover_index is None)
 
     def optics(self, rs, background, nodes):
         o = self._factor().optics(rs, background, nodes)
@@ -687,7 +715,8 @@ class BRDF(Geometry):
 
     @property
     def label(self):
-        return f"brdf:{_scalar_text(self.incidence_deg)}:{_scalar_text(self.viewing_deg)}"
+        return (f"brdf:{_scalar_text(self.incidence_deg)}:{_scalar_text(self.viewing_deg)}"
+                + _option_text(self, Directional._OPTIONS, _COVER_FLAGS, Directional._DEFAULTS))
 
     @property
     def quantity_label(self):
@@ -697,8 +726,11 @@ class BRDF(Geometry):
     def parse(cls, text):
         if not text.startswith("brdf"):
             return None
-        _, i, v = _split(text, "brdf", 3, 3)
-        return cls(float(i), float(v))
+        parts = text.split(":")
+        if len(parts) < 3:
+            raise ValueError("brdf")
+        _, i, v = parts[:3]
+        return cls(float(i), float(v), **_options(parts[3:], Directional._OPTIONS, _COVER_FLAGS))
 
     def background_factor(self, rs, nodes):
         A, r, _ = self._factor().background_factor(rs, nodes)
@@ -715,6 +747,9 @@ class BRDF(Geometry):
 
         from ._polarimetry import diffuse_mueller, polarized_brdf
 
+        if not self._ideal:
+            raise LayerstackError(f"geometry {name!r}: --polarization models the ideal instrument only "
+                                  "(no apertures, no cover glass)")
         i, v = self.incidence_deg, self.viewing_deg
         if polarization == "mueller":
             M = np.asarray(diffuse_mueller(stack, wavelength_nm, i, v, nodes=nodes), dtype=float)

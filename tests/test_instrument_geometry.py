@@ -396,3 +396,21 @@ def test_optics_of_another_aperture_or_port_are_refused():
     plain = ls.fixed_optics(VARNISH, WL, ls.Sphere(8.0), nodes=NODES)
     with pytest.raises(ls.LayerstackError, match="rebuild"):
         ls.reflectance(VARNISH, WL, ls.Sphere(8.0, port_half_angle_deg=5.0), nodes=NODES, optics=plain)
+
+
+def test_brdf_as_built_is_the_directional_reading_over_pi():
+    """BRDF takes the same apertures and cover glass: its reading is Directional's / π (eq. 76);
+    ideal by default (bit for bit); spelled brdf:I:V:illum=…; the polarized BRDF refuses them."""
+    kw = dict(illumination_half_angle_deg=2.0, viewing_half_angle_deg=3.0, cover_index=1.5)
+    got = np.asarray(ls.BRDF(45.0, 0.0, **kw).measure(VARNISH, WL, nodes=NODES))
+    want = np.asarray(ls.Directional(45.0, 0.0, **kw).measure(VARNISH, WL, nodes=NODES)) / np.pi
+    np.testing.assert_allclose(got, want, rtol=1e-15)
+    np.testing.assert_allclose(ls.invert_background(VARNISH, WL, got, ls.BRDF(45.0, 0.0, **kw), nodes=NODES), 0.7,
+                               rtol=0, atol=1e-12)
+    ideal = np.asarray(ls.BRDF(45.0, 0.0).measure(VARNISH, WL, nodes=NODES))
+    assert np.array_equal(ideal, np.asarray(ls.Directional(45.0, 0.0).measure(VARNISH, WL, nodes=NODES)) / jnp.pi)
+    g = ls.parse_geometry("brdf:45:0:illum=2:view=3:cover=1.5")
+    assert g == ls.BRDF(45.0, 0.0, **kw) and ls.parse_geometry(g.label) == g
+    assert ls.BRDF(45.0, 0.0).label == "brdf:45:0"
+    with pytest.raises(ls.LayerstackError, match="ideal instrument"):
+        g.polarized_columns(VARNISH, WL, "brdf", "ss", NODES)

@@ -30,16 +30,15 @@ import numpy as np
 
 from ._custom_types import Array, Float, RealLike, RealSpectrumLike
 from ._fresnel import exit_medium_ratio
-from ._illumination import (_snell, diffuse_joined, diffuse_resolved, hemisphere, natural_T_front,
-                            snell_invariant_from_cos)
+from ._illumination import _snell, diffuse_joined, diffuse_resolved, hemisphere, natural_T_front
 from ._instrument import (DEFAULT_CONE_NODES, cap_measure, check_cone, cone_rule, covered,
                           substituted_reading)
 from ._optics import Optics, check_optics, coherent_films
 from ._quadrature import DEFAULT_NODES
 from ._response import join_interfaces, natural, stack_interfaces, stack_intensities
 from ._stack import LambertianBackground, ResolvedStack, Stack, as_spectrum, resolve
-from ._validate import (LayerstackError, check, check_angle_deg, check_nonnegative, check_positive,
-                        check_unit_interval, is_concrete)
+from ._validate import (LayerstackError, check_angle_deg, check_nonnegative, check_positive, check_unit_interval,
+                        is_concrete)
 
 # the illumination drivers are public through this module too (their historical home)
 from ._illumination import Diffuse, Response, diffuse, specular  # noqa: F401  (re-exported)
@@ -214,8 +213,9 @@ def _split(text: str, kind: str, n_min: int, n_max: int) -> list[str]:
 
 
 # ----------------------------------------------------------------- non-ideal instruments (issue 15)
-# Fields shared by Sphere and Directional (declared in each class, after its own angles, so that
-# positional construction stays as it was): a cover glass in front of the sample.
+# The cover-glass fields are shared by Sphere, Directional and BRDF; they are declared in each
+# class after its own fields (not in a base class, whose fields would come first and change the
+# positional construction Sphere(8.0, "excluded"), Directional(45.0, 0.0)).
 
 
 def _is_zero(x) -> bool:

@@ -252,7 +252,8 @@ def _solve_function(objective: Objective, o: SolverOptions):
         sol = optx.least_squares(fn, solver, u0, args=(args, optics), has_aux=True, max_steps=o.max_steps,
                                  throw=False, options={"give_up": give_up} if o.method == "lm" else None)
         x = hold_on_bounds(layout, layout.to_physical(sol.value))
-        (model, res, pen), J = sol.aux
+        # the aux of the solution: the final state's (Solution.aux lags one accepted step behind)
+        (model, res, pen), J = sol.state.aux
         return x, sol.stats["num_steps"], _status(sol.result, x), (model, res, pen, J)
 
     return solve

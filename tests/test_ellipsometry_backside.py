@@ -157,7 +157,7 @@ def test_reflection_matches_explicit_beam_sum(case):
     got = _reading(case)
     want = reading_of(explicit_sum(*CASES[case], ANGLES, WL))
     for q in ("N", "C", "S", "depolarization"):
-        np.testing.assert_allclose(np.asarray(getattr(got, q)), want[q], rtol=0, atol=1e-10, err_msg=q)
+        np.testing.assert_allclose(np.asarray(getattr(got, q)), want[q], rtol=0, atol=1e-12, err_msg=q)
     np.testing.assert_allclose(np.asarray(got.psi_deg), want["psi_deg"], rtol=0, atol=1e-8)
     d = np.asarray(got.delta_deg) - want["delta_deg"]
     np.testing.assert_allclose((d + 180.0) % 360.0 - 180.0, 0.0, atol=1e-8)

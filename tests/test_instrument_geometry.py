@@ -246,6 +246,11 @@ def test_sphere_multiplier_over_a_substrate_and_errors():
         ls.Sphere(8.0, wall_reflectance=0.98, sample_port_fraction=0.7, open_port_fraction=0.5)
     with pytest.raises(ls.LayerstackError, match="wall_reflectance"):
         ls.Sphere(8.0, wall_reflectance=1.2)
+    f = jax.jit(lambda w: ls.Sphere(8.0, "included", wall_reflectance=w, sample_port_fraction=0.04).measure(sub, GRID))
+    np.testing.assert_allclose(f(0.98), ls.Sphere(8.0, "included", wall_reflectance=0.98,
+                                                  sample_port_fraction=0.04).measure(sub, WL), rtol=1e-14)
+    with pytest.raises(Exception, match="wall_reflectance"):
+        jax.block_until_ready(f(1.2))
 
 
 # ------------------------------------------------------------------ cover glass

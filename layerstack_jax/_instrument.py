@@ -37,7 +37,9 @@ __all__ = ["cone_rule", "cap_measure", "cone_projected_solid_angle", "substitute
 #: readings, a 180 nm film on a 20 µm varnish (α = 2e-5/nm) over a background: port cones of
 #: 5°, 12°, 25° about 8° and 10° about 30°, max error 6e-12, 2e-10, 5e-9, 1.3e-9 with 2 nodes,
 #: ≤ 6e-15 with 4, ≤ 5e-17 from 6 on; a 10° illumination cone at 45°: 9e-8 (2), 1.6e-12 (4),
-#: 5e-16 (6). 8 leaves a margin for stacks whose T(θ) varies faster (thicker coherent films).
+#: 5e-16 (6). T(θ) with angular fringes needs more: a 3 µm coherent film (n = 1.8) on that
+#: varnish, a 10° cone about 45°: 6e-8 (4), 1.9e-9 (6), 7e-11 (8), 3e-14 (12) — hence 8.
+#: Cost: 2 nodes² directions per cone (128 with 8), each one Fresnel evaluation of the stack.
 DEFAULT_CONE_NODES = 8
 
 #: Thickness (nm) of the air gap between a cover glass and the sample: any value gives the same

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, ellipsometry, reflectance
-from layerstack_jax.io import (instrument_geometry, load_instrument, load_stack, parse_values, parse_wavelengths,
-                               save_spectra_csv)
+from layerstack_jax import DEFAULT_NODES, Ellipsometric, LayerstackError, check_stack, reflectance
+from layerstack_jax.io import (check_instrument_used, instrument_geometry, load_instrument, load_stack, parse_values,
+                               parse_wavelengths, save_spectra_csv)
 
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _precision
 
@@ -40,7 +40,9 @@ def _add_predict_parser(sub) -> None:
                    "(columns GEOM_mIJ)")
     p.add_argument("--ellipsometry", action="append", type=float, metavar="ANGLE",
                    help="also write psi_ANGLE and delta_ANGLE (degrees; Delta as instruments report it, 180 - tmm's Delta, in (-180, 180]) "
-                   "of a coherent stack; repeat for several angles")
+                   "as an ellipsometer reads them (with the stack file's [instrument] offsets/bandwidth; a stack with thick "
+                   "layers, e.g. a transparent substrate with its backside, also gets depolarization_ANGLE); repeat for "
+                   "several angles")
     p.add_argument("--vary", action="append", metavar="LAYER.FIELD=START:STOP:STEP",
                    help="predict a batch of stacks: the value of LAYER.FIELD (the layer's name and key in the stack "
                         "file, e.g. varnish.thickness_nm, varnish.alpha_per_nm, film.n, film.k; or background.rho_g, "
@@ -215,8 +217,11 @@ def _cmd_predict(args) -> int:
     requested = _parse_geometries(args.geometry)
     with _precision(args.float32):
         stack = load_stack(args.stack)
-        settings = load_instrument(args.stack)  # the stack file's [instrument], if any
-        requested = [(name, instrument_geometry(g, settings)) for name, g in requested]
+        settings = load_instrument(args.stack)  # the stack file's [instrument], if any: each geometry takes its keys
+        requested = [(name, instrument_geometry(g, settings, partial=True)) for name, g in requested]
+        ellipsometers = [instrument_geometry(Ellipsometric(angle, "psi"), settings, partial=True)
+                         for angle in args.ellipsometry or ()]
+        check_instrument_used(settings, [g for _, g in requested] + ellipsometers)
         try:
             check_stack(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
         except LayerstackError as e:
@@ -244,12 +249,15 @@ def _cmd_predict(args) -> int:
                 continue
             columns[name] = np.asarray(values, dtype=float)
             geometries[name] = geometry
-        for angle in () if args.vary or args.vary_table else args.ellipsometry or ():
-            try:
-                e = ellipsometry(stack, wavelength, angle)
+        for angle, ellipsometer in zip(args.ellipsometry or (), () if args.vary or args.vary_table else ellipsometers):
+            try:  # what the ellipsometer reads: depolarized by thick layers, averaged over its non-idealities
+                e = ellipsometer.reading(stack, wavelength)
             except LayerstackError as err:
                 raise LayerstackError(f"--ellipsometry {angle:g}: {err}") from None
-            for key, values in ((f"psi_{angle:g}", e.psi_deg), (f"delta_{angle:g}", e.delta_deg)):
+            read = [(f"psi_{angle:g}", e.psi_deg), (f"delta_{angle:g}", e.delta_deg)]
+            if not (ellipsometer.ideal and all(stack.coherent)):  # a coherent, ideal reading is not depolarized
+                read.append((f"depolarization_{angle:g}", e.depolarization))
+            for key, values in read:
                 columns[key] = np.asarray(values, dtype=float)
                 geometries[key] = None
     bad = [name for name, v in columns.items() if not np.all(np.isfinite(v))]

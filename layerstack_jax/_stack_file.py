@@ -25,7 +25,8 @@ from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpec
 from ._validate import LayerstackError, is_concrete
 
 __all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
-           "load_fit_stack", "load_instrument", "instrument_geometry", "stack_to_dict", "save_stack"]
+           "load_fit_stack", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
+           "save_stack"]
 
 _TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "instrument")
 #: keys of ``[instrument]`` that are not numbers: which layer a thickness spread applies to
@@ -546,19 +547,30 @@ def load_instrument(path) -> InstrumentSettings:
     return _instrument_settings(str(path), table, None, names)
 
 
-def instrument_geometry(geometry, settings: InstrumentSettings):
-    """``geometry`` with the fields of ``settings`` set (each must be a field of it: a key that
-    is not, e.g. ``bandwidth_nm`` for a sphere, is a :class:`LayerstackError` naming the key, the
-    geometry and its fields). Returns the geometry unchanged for empty settings."""
+def instrument_geometry(geometry, settings: InstrumentSettings, *, partial: bool = False):
+    """``geometry`` with the fields of ``settings`` set. Each key must be a field of it (a key
+    that is not, e.g. ``bandwidth_nm`` for a sphere, is a :class:`LayerstackError` naming the
+    key, the geometry and its fields) unless ``partial`` (several geometries share one table:
+    each takes the keys it has; :func:`check_instrument_used` then checks that every key was
+    taken by one). Returns the geometry unchanged when no key applies."""
     given = {**settings.values, **settings.static}
-    if not given:
-        return geometry
     fields = [f.name for f in dataclasses.fields(geometry)]
-    for key in given:
+    if not partial:
+        for key in given:
+            if key not in fields:
+                raise LayerstackError(f"{settings.where}: {key}: not a field of the geometry {geometry.label!r} "
+                                      f"({type(geometry).__name__}; its fields: {', '.join(fields)})")
+    given = {k: v for k, v in given.items() if k in fields}
+    return dataclasses.replace(geometry, **given) if given else geometry
+
+
+def check_instrument_used(settings: InstrumentSettings, geometries) -> None:
+    """Raise naming the key when a key of ``settings`` is a field of none of ``geometries``."""
+    fields = {f.name for g in geometries for f in dataclasses.fields(g)}
+    for key in {**settings.values, **settings.static}:
         if key not in fields:
-            raise LayerstackError(f"{settings.where}: {key}: not a field of the geometry {geometry.label!r} "
-                                  f"({type(geometry).__name__}; its fields: {', '.join(fields)})")
-    return dataclasses.replace(geometry, **given)
+            labels = ", ".join(g.label for g in geometries) or "none"
+            raise LayerstackError(f"{settings.where}: {key}: not a field of any geometry asked for ({labels})")
 
 
 def load_fit_stack(path) -> tuple[Stack, list[FreeDeclaration]]:

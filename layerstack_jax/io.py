@@ -107,7 +107,8 @@ apertures — and a key that is not a field of the geometry is an error naming i
 geometry's fields. A free key is fitted as one value shared by every dataset of the fit whose
 geometry has the field (``fitting.instrument(key, "all")``), named by the key
 (``angle_offset_deg``). :func:`load_instrument` reads the table into :class:`InstrumentSettings`;
-:func:`instrument_geometry` applies it to a geometry.
+:func:`instrument_geometry` applies it to a geometry (``layerstack predict`` applies it to every
+geometry asked for, each taking the keys it has, and refuses a key that none of them has).
 
 Tables are linearly interpolated and never extrapolated: predicting outside a table's range is
 an error. Relative file names are taken relative to the directory of the TOML file.
@@ -181,6 +182,7 @@ from ._spectra_csv import save_spectra_csv as save_spectra_csv
 from ._stack_file import FREE_KEYS as FREE_KEYS
 from ._stack_file import FreeDeclaration as FreeDeclaration
 from ._stack_file import InstrumentSettings as InstrumentSettings
+from ._stack_file import check_instrument_used as check_instrument_used
 from ._stack_file import instrument_geometry as instrument_geometry
 from ._stack_file import load_fit_stack as load_fit_stack
 from ._stack_file import load_instrument as load_instrument
@@ -200,6 +202,7 @@ __all__ = [
     "InstrumentSettings",
     "load_instrument",
     "instrument_geometry",
+    "check_instrument_used",
     "read_csv_columns",
     "read_spectra_csv",
     "save_spectra_csv",

@@ -119,3 +119,49 @@ def test_cli_fit_recovers_a_declared_angle_offset(tmp_path):
     assert values["angle_offset_deg"] == pytest.approx(0.3, abs=1e-6)
     assert values["thickness_nm[film]"] == pytest.approx(123.4, rel=1e-7)
     assert "angle_offset_deg" in run.stdout
+
+
+SLIDE = """
+[[layers]]
+name = "glass"
+n = 1.5
+thickness_nm = 1e6
+coherent = false
+
+[substrate]
+n = 1.0
+
+[instrument]
+{instrument}
+"""
+
+
+def _predict(tmp_path, instrument: str, *extra):
+    from layerstack_cli import main
+
+    model = tmp_path / "slide.toml"
+    model.write_text(SLIDE.format(instrument=instrument))
+    out = tmp_path / "slide.csv"
+    code = main(["predict", str(model), "-w", "400:700:100", "-g", "specular:60", "--ellipsometry", "60", "-o", str(out),
+                 *extra])
+    return code, out
+
+
+def test_cli_predict_reads_a_glass_slide_as_the_ellipsometer_does(tmp_path, capsys):
+    """``predict --ellipsometry`` of a thick slide (a thick incoherent layer: the backside's beams
+    add incoherently) writes ψ, Δ and the depolarization, equal to the Ellipsometric reading with
+    the table's bandwidth; a key no geometry has is refused naming it."""
+    from layerstack_jax.io import read_spectra_csv
+
+    code, out = _predict(tmp_path, "bandwidth_nm = 3.0")
+    assert code == 0
+    wl, cols = read_spectra_csv(out)
+    stack = ls.Stack(1.0, [ls.Layer(1.5, 1e6, coherent=False, name="glass")], ls.Substrate(1.0))
+    e = ls.Ellipsometric(60.0, "psi", bandwidth_nm=3.0).reading(stack, wl)
+    np.testing.assert_allclose(cols["psi_60"], e.psi_deg, rtol=1e-9)
+    np.testing.assert_allclose(cols["delta_60"], e.delta_deg, atol=1e-9)
+    np.testing.assert_allclose(cols["depolarization_60"], e.depolarization, atol=1e-12)
+    assert np.all((cols["depolarization_60"] > 1e-4) & (cols["depolarization_60"] < 1.0))  # the backside depolarizes (5e-4)
+    code, _ = _predict(tmp_path, "port_half_angle_deg = 5.0")
+    assert code == 2
+    assert "port_half_angle_deg: not a field of any geometry asked for" in capsys.readouterr().err

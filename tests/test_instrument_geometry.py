@@ -123,14 +123,11 @@ def _normal_frame_cone_integral(f, axis, beta):
     return total
 
 
-def _point_reading(incidence, viewing):
-    """The library's ideal 45/0-type point reading, cached per pair of angles (radians in)."""
-
-    @functools.lru_cache(maxsize=None)
-    def at(ti, tv):
-        return np.asarray(_directional_jit(jnp.float64(np.rad2deg(ti)), jnp.float64(np.rad2deg(tv))))
-
-    return at
+@functools.lru_cache(maxsize=None)
+def _point(ti, tv):
+    """The library's ideal 45/0-type point reading of ST at (θ_i, θ_v) in radians, ``(wl,)``,
+    cached (scipy asks for the same θ once per inner integral)."""
+    return np.asarray(_directional_jit(jnp.float64(np.rad2deg(ti)), jnp.float64(np.rad2deg(tv))))
 
 
 @jax.jit
@@ -145,7 +142,7 @@ def test_port_cone_loss_matches_scipy(axis, beta):
     (radiance) at (θ_0, θ): scipy dblquad against the library's fixed nodes, ≤ 1e-8."""
     ideal = np.asarray(ls.Sphere(axis).measure(ST, WL, nodes=NODES))
     coned = np.asarray(ls.Sphere(axis, port_half_angle_deg=beta).measure(ST, WL, nodes=NODES))
-    at = _point_reading(None, None)
+    at = _point
     t0 = np.deg2rad(axis)
     for k in range(len(WL)):
         lost = _normal_frame_cone_integral(lambda t: at(t0, t)[k], axis, beta) / np.pi
@@ -304,7 +301,7 @@ def test_apertures_match_scipy():
     by scipy dblquad ≤ 1e-8; both cones: the product structure of the point reading
     (R(θi, θv) R(θi0, θv0) = R(θi, θv0) R(θi0, θv), checked here on random angles) makes the
     double mean the product of the single ones over the central reading."""
-    at = _point_reading(None, None)
+    at = _point
     ill = np.asarray(ls.Directional(45.0, 0.0, illumination_half_angle_deg=3.0).measure(ST, WL, nodes=NODES))
     view = np.asarray(ls.Directional(45.0, 0.0, viewing_half_angle_deg=5.0).measure(ST, WL, nodes=NODES))
     point = np.asarray(ls.Directional(45.0, 0.0).measure(ST, WL, nodes=NODES))

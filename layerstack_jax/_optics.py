@@ -33,7 +33,10 @@ class Optics(eqx.Module):
     thicknesses, α(λ) and ρg(λ) evaluates the complex Fresnel algebra once, not at every step.
 
     Fields (:class:`~layerstack_jax._response.Interfaces` or None): ``incidence`` at the
-    illumination angle, ``viewing`` at the viewing angle (:class:`Directional`, :class:`BRDF`),
+    illumination angle (at the directions of the illumination cone with a finite aperture),
+    ``viewing`` at the viewing angle (:class:`Directional`, :class:`BRDF`; the directions of the
+    viewing cone with a finite aperture) or at the directions of a :class:`Sphere`'s specular
+    port cone (:mod:`layerstack_jax._instrument`),
     ``diffuse`` at the back-side hemispherical nodes (over a background) with their ``weights``;
     ``index`` and ``films``: the indices and coherent-film thicknesses they were made with
     (checked against the stack when both are concrete); ``reach`` (static): which packets each

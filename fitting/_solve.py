@@ -27,7 +27,10 @@ reached on the way, or the solver failed there), the fit is finished from that p
 L-BFGS-B, which keeps bounds exactly, and the note says so.
 
 Each objective compiles one solve function per method and options (cached on the objective);
-data travel in ``args``, so later fits with other data — and batched fits, multi-start — reuse it.
+data travel in ``args``, so later fits with other data and the starts of a multi-start reuse it
+(batched fits compile one vmapped copy). The least-squares methods take the statistics' Jacobian,
+model and residuals from the solver's last evaluation (:func:`jacobian_with_statistics`): the
+compiled fit holds one copy of the model's Jacobian.
 A fit never raises on non-convergence: the result carries a status (:data:`STATUS`) and the
 reason in the library's words.
 """
@@ -308,6 +311,10 @@ def jacobian_with_statistics(objective: Objective):
 
         J, (r, by) = jax.jacfwd(value_twice, has_aux=True)(z_of(u))
         return r, (by, J)
+
+    # jitted: optimistix traces the primal for its shapes and the JVP rule below for the solve;
+    # the second trace is then a cache hit (inlined by XLA: nothing changes at run time)
+    evaluate = jax.jit(evaluate)
 
     @jax.custom_jvp
     def g(u, args_optics):
@@ -604,16 +611,17 @@ def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -
     solution (clipped into the bounds); NumPy output, one row per fit, with the steps of the
     earlier run added."""
     layout = objective.layout
-    start = jnp.asarray(starting_point(objective, o, np.clip(np.asarray(out.x, float)[rows], layout.lower,
-                                                             layout.upper)))
-    args = jax.tree.map(jnp.asarray, args)
+    start = np.asarray(starting_point(objective, o, np.clip(np.asarray(out.x, float)[rows], layout.lower,
+                                                            layout.upper)))
     if ("fit", o, True, BLOCK) not in compiled_cache(objective):
         # fits of ``fit`` (one start or a multi-start): the solver it has compiled, one fit after
-        # the other, not a batched copy compiled for them
+        # the other, not a batched copy compiled for them (host rows in: no eager device ops)
         one = compiled_fit(objective, o, batched=False)
-        new = [one(start[k], jax.tree.map(lambda a: a[k], args), objective.optics) for k in range(len(rows))]
+        new = [one(start[k], jax.tree.map(lambda a: np.asarray(a)[k], args), objective.optics)
+               for k in range(len(rows))]
         new = jax.tree.map(lambda *a: np.stack([np.asarray(v) for v in a]), *new)
     else:
+        start, args = jnp.asarray(start), jax.tree.map(jnp.asarray, args)
         new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(start, args, objective.optics))
     return new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
 

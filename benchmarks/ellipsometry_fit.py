@@ -378,14 +378,19 @@ WHERE_THE_TIME_GOES = [
     "compiled fit, one Jacobian evaluation less per fit;",
     "- a multi-start runs its starts one after the other through the fit's own compiled solver (no second "
     "program), and a start still 10× above the best cost after 3× that start's steps is given up "
-    "(`give_up_rule`; counted apart in the report): on this data 10 of 16 starts are given up after 33 steps "
-    "instead of 60–256; the objective's own start wins ties to round-off, so the multi-start reports the single "
-    "fit;",
+    "(`give_up_rule`; counted apart in the report): on this data 7–10 of the 16 starts are given up after 33 "
+    "steps instead of running 60–256 steps to minima 1e5–1e7 times worse (they were counted as converged when "
+    "they reached one: the converged count drops from 11–13 to 6–9 of 16); the objective's own start wins ties "
+    "to round-off, so the multi-start reports the single fit;",
     "- the reported residuals are made by one compiled call (`fitting._results._plain_residuals`).",
     "",
-    "What is left is physics: the model's forward-mode Jacobian (3 angles × 700 λ, 3 tangents) costs ~2 ms per "
-    "LM step, 8× its primal (0.45 ms) — the JVP of `layerstack_jax._ellipsometry.reflection_amplitudes` — and "
-    "its compile ~1.5 s; the owner of `_ellipsometry.py`/`_coherent.py` has the profile.",
+    "What is left of the first fit (~5 s CPU): tracing ~1 s, XLA ~3.5 s for one program — optimistix's LM with "
+    "the statistics ~1 s (measured with a trivial model), the model's forward-mode Jacobian ~1.5–2 s (3 angles × "
+    "700 λ, 3 tangents). That Jacobian is also what a further fit spends its time on (~2 ms per LM step): "
+    "standalone it costs 7–9× the model itself (0.45 ms), the JVP of "
+    "`layerstack_jax._ellipsometry.reflection_amplitudes` (physics side, not changed here). Fixed materials "
+    "(Si, SiO2 tables) evaluated once on the grid instead of inside the program would save ~0.3 s of compile "
+    "(measured; not done).",
 ]
 
 

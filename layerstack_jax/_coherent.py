@@ -13,7 +13,15 @@ with phase inside it. The recursion runs from the exit medium back to the incide
 a 10 µm metal film makes the phase factor underflow to 0, which gives the reflectance of the
 bulk metal instead of an overflow (PHYSICS.md, trap 5). A forward transfer matrix would
 contain :math:`e^{-i\phi_j}` and overflow there.
+
+**Derivative.** The recursion carries a closed-form derivative (a ``jax.custom_jvp``,
+:func:`_rouard_sensitivities`): the sensitivities of (γ, τ) to every film's phase and every
+interface's r, t come from one sweep from the incidence side down over the stored steps, and a
+tangent or cotangent of a thickness or an index costs a multiply-add per film. On P3 (two films
+on a varnish over a background, 45°/0°, 401 λ) the 401 × 3 Jacobian by ``jacfwd`` costs 2.3
+forwards instead of 6.7; P1's reverse-mode gradient (10 films) 1.2 forwards instead of 1.7.
 """
+
 
 from __future__ import annotations
 

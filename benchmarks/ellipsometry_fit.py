@@ -174,7 +174,9 @@ def run(n_wavelengths: int = 700, repeats: int = 10, starts: int = 16, seed: int
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    jax.monitoring.register_event_duration_secs_listener(_listen)
+    if not _WATCH.get("registered"):  # once per process
+        jax.monitoring.register_event_duration_secs_listener(_listen)
+        _WATCH["registered"] = True
     import fitting
     import layerstack_jax as ls
 

@@ -71,7 +71,7 @@ def quality_verdict(reduced_chi2: float, dof: int, sigma_given: bool, s: float) 
     below 2/3) is implausible — the model misses the data (or σ is too small), resp. σ is too
     large. Without σ, the χ² computed with σ = 1 says nothing: the verdict states the σ
     estimated from the residuals, ``s``."""
-    from scipy.stats import chi2 as chi2_distribution
+    from scipy.special import chdtr, chdtrc  # χ² cdf and sf (what scipy.stats.chi2 calls; lighter import)
 
     if dof <= 0:
         return f"no degrees of freedom (ν = {dof}): χ² cannot judge the fit", [
@@ -84,12 +84,12 @@ def quality_verdict(reduced_chi2: float, dof: int, sigma_given: bool, s: float) 
     if not np.isfinite(reduced_chi2):
         return text, ["χ² is not finite: the fit failed"]
     chi2 = reduced_chi2 * dof
-    if reduced_chi2 > 1.5 and chi2_distribution.sf(chi2, dof) < IMPLAUSIBLE_P:
+    if reduced_chi2 > 1.5 and chdtrc(dof, chi2) < IMPLAUSIBLE_P:
         return text + ": implausibly large", [
             f"χ²/ν = {reduced_chi2:.4g} ≫ 1: the model does not describe the data within the given σ "
             f"(or σ is underestimated by a factor ~{math.sqrt(reduced_chi2):.3g}); the standard errors, "
             "computed from the given σ, are then too small"]
-    if reduced_chi2 < 2.0 / 3.0 and chi2_distribution.cdf(chi2, dof) < IMPLAUSIBLE_P:
+    if reduced_chi2 < 2.0 / 3.0 and chdtr(dof, chi2) < IMPLAUSIBLE_P:
         return text + ": implausibly small", [
             f"χ²/ν = {reduced_chi2:.4g} ≪ 1: the data scatter far less than the given σ (σ overestimated by a "
             f"factor ~{1 / math.sqrt(max(reduced_chi2, 1e-300)):.3g}, or noise-free data); the standard errors "
@@ -126,12 +126,12 @@ def delta_sign_warnings(objective: Objective, options, args, chi2: float, dof: i
     model reports). If that fit reaches a χ² at least :data:`SIGN_FLIP_RATIO` times smaller, the
     warning says so. Cost: one extra solve, only for such fits. ``args``: the fit's
     ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom."""
-    from scipy.stats import chi2 as chi2_distribution
+    from scipy.special import chdtrc  # χ² sf (what scipy.stats.chi2.sf calls; lighter import)
 
     odd = [ds.colour is None and bool(getattr(ds.geometry, "odd_in_delta", False)) for ds in objective.datasets]
     if not any(odd) or not objective.sigma_given or dof <= 0 or not np.isfinite(chi2):
         return []
-    if not (chi2 / dof > 1.5 and chi2_distribution.sf(chi2, dof) < IMPLAUSIBLE_P):
+    if not (chi2 / dof > 1.5 and chdtrc(dof, chi2) < IMPLAUSIBLE_P):
         return []
     import jax.numpy as jnp
 

@@ -114,7 +114,7 @@ class SpectralTarget(eqx.Module):
 
     def evaluate(self, stack: ls.Stack) -> Float[Array, "A W"]:
         """The targeted quantity of ``stack``, shaped ``(A, W)``."""
-        out = ls.specular(stack, self.wavelength_nm, jnp.deg2rad(self.angle_deg), both_sides=False)
+        out = ls.specular(stack, self.wavelength_nm, self.angle_deg, both_sides=False)  # degrees
         R, T = out.R_front, out.T_front  # (A, 2, W)
         if self.polarization == "natural":
             R, T = 0.5 * (R[:, 0] + R[:, 1]), 0.5 * (T[:, 0] + T[:, 1])
@@ -171,7 +171,7 @@ class ColourTarget(eqx.Module):
     def evaluate(self, stack: ls.Stack) -> Float[Array, "A 3"]:
         """CIELAB of the natural-light specular reflectance at each angle, ``(A, 3)``."""
         wl = jnp.asarray(self.colour_space.wavelength_nm)
-        R = ls.specular(stack, wl, jnp.deg2rad(self.angle_deg), both_sides=False).R_front
+        R = ls.specular(stack, wl, self.angle_deg, both_sides=False).R_front  # degrees
         return self.colour_space.Lab(0.5 * (R[:, 0] + R[:, 1]))
 
     def deviation(self, stack: ls.Stack) -> Float[Array, " A"]:

@@ -253,3 +253,25 @@ def test_needle_design_readme_call_as_the_user_made_it(capsys):
     result, _ = D.needle_design(stack, targets, materials)
     assert not _thin(result.stack, 0.5)
     assert "needle design" in capsys.readouterr().err
+
+
+def test_targets_at_oblique_angles_are_evaluated_at_those_angles():
+    """Targets take degrees (``angle_deg``), evaluated by tmm at the same angles: an AR target at
+    30° was once evaluated at 30° read as radians (0.52°), silently designing for normal incidence."""
+    import warnings
+
+    wl = np.array([450.0, 550.0, 650.0])
+    angles = np.array([0.0, 30.0, 60.0])
+    stack = ls.Stack(1.0, [ls.Layer(2.1, 70.0), ls.Layer(1.38, 95.0)], ls.Substrate(1.52))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "radians given?" warning
+        R = np.asarray(D.SpectralTarget(jnp.asarray(wl), 0.0, 0.01, angle_deg=angles).evaluate(stack))
+    ref = np.array([[_tmm_R([1.0, 2.1, 1.38, 1.52], [INF, 70.0, 95.0, INF], lam, math.radians(a)) for lam in wl]
+                    for a in angles])
+    np.testing.assert_allclose(R, ref, rtol=1e-12)
+    # the colour target too: CIELAB of tmm's reflectance at 45°
+    cs = ls.ColourSpace(np.linspace(380.0, 780.0, 41))
+    lab = np.asarray(D.ColourTarget(cs, np.zeros(3), 45.0).evaluate(stack))[0]
+    R45 = np.array([_tmm_R([1.0, 2.1, 1.38, 1.52], [INF, 70.0, 95.0, INF], lam, math.radians(45.0))
+                    for lam in np.asarray(cs.wavelength_nm)])
+    np.testing.assert_allclose(lab, np.asarray(cs.Lab(jnp.asarray(R45))), atol=1e-9)

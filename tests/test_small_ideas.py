@@ -42,7 +42,9 @@ def test_safe_atan2_values_equal_numpy_everywhere_but_the_origin():
     got = np.asarray(safe_atan2(jnp.asarray(y), jnp.asarray(x)))
     ref = np.arctan2(y, x)  # signed zeros included: atan2(-0.0, -1) = -pi
     origin = (x == 0) & (y == 0)
-    np.testing.assert_array_equal(got[~origin], ref[~origin])
+    # XLA's atan2 and libm's may round differently by one unit in the last place (seen: 1 of 77
+    # points on this VM's CPU): equal to 2 ulp, signs and quadrants exact
+    np.testing.assert_array_max_ulp(got[~origin], ref[~origin], maxulp=2)
     np.testing.assert_array_equal(got[origin], 0.0)
     assert np.all(np.signbit(got[~origin]) == np.signbit(ref[~origin]))
 

@@ -412,6 +412,14 @@ class Objective:
         except LayerstackError as e:
             raise LayerstackError(f"model at the starting values: {e}") from None
 
+    def __getstate__(self) -> dict:
+        """Pickled (e.g. scattered to Dask workers by :func:`~fitting.fit_cube`) without what has
+        been compiled for it in this process (solvers, lookup tables: ``_compiled``, neither
+        picklable nor valid in another process); the receiving process compiles its own once."""
+        state = dict(self.__dict__)
+        state.pop("_compiled", None)
+        return state
+
     def _check_wavelengths_read(self) -> None:
         """Material tables against the wavelengths each instrument reads beyond the model grid
         (:meth:`~layerstack_jax.Geometry.wavelengths_read`: an ellipsometer's bandwidth), its

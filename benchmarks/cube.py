@@ -1,6 +1,7 @@
 """fit_cube on a zarr cube on disk vs fit_batch on the same pixels in memory, standalone:
 
     python -m benchmarks.cube [--size 100 100] [--chunk 25 25] [--client processes]
+    python -m benchmarks.cube --workers 1 2 --memory-limit 1GB     # scaling over Dask worker processes
 
 The pixel model is benchmark F1's (``benchmarks/fitting_cases.py``): 3 incoherent layers over a
 Lambertian background, sphere 8° SCE, 401 λ; per pixel the top layer's thickness and 3 B-spline
@@ -14,8 +15,11 @@ time is not counted:
 * ``fit_cube``: the same job out of core, region by region, maps written to zarr.
 
 Reported: both wall times and their ratio (target <= 1.3), pixels/s, the peak RSS of the
-process, agreement of the maps with fit_batch, and the machine's load. Writes
-``benchmarks/results/cube.json`` and ``.md``.
+process, agreement of the maps with fit_batch, and the machine's load. With ``--workers N ...``
+the same ``fit_cube`` job also runs on a :class:`distributed.LocalCluster` of N single-threaded
+worker processes, each limited to ``--memory-limit`` (a row per N: pixels/s, parallel efficiency
+against the 1-worker row, the maps against fit_batch). Writes ``benchmarks/results/cube.json``
+and ``.md``.
 """
 
 from __future__ import annotations
@@ -43,6 +47,8 @@ def main(argv=None) -> dict:
     p.add_argument("--chunk-size", type=int, default=100, help="fits per compiled fit_batch call")
     p.add_argument("--client", default=None, help="None (this process), 'processes', or a scheduler address")
     p.add_argument("--dir", default=None, help="where to write the cube and the maps (default: a temporary dir)")
+    p.add_argument("--workers", type=int, nargs="*", default=[], help="also run on LocalClusters of these many workers")
+    p.add_argument("--memory-limit", default="1GB", help="memory limit of each worker process (Dask's spelling)")
     a = p.parse_args(argv)
 
     import jax
@@ -112,6 +118,7 @@ def main(argv=None) -> dict:
            "fit_cube_pixels_per_s": ny * nx / t_cube, "max_rel_diff_maps_vs_fit_batch": agree,
            "converged_frac": float(ref.converged.mean()), "peak_rss_bytes": _peak_rss(),
            "loadavg_before": load0, "loadavg_after": load1, "cpu_count": os.cpu_count(), "dir": str(work)}
+    res["workers"] = [_on_cluster(n, a.memory_limit, obj, lazy, work, a, ref, ny * nx) for n in a.workers]
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "cube.json").write_text(json.dumps(res, indent=2))
     md = ("| cube | pixels fitted | fit_batch (memory) s | fit_cube (zarr) s | ratio | px/s | maps vs fit_batch | "
@@ -119,12 +126,52 @@ def main(argv=None) -> dict:
           f"| {ny}×{nx}×{WL.size} | {res['pixels_fitted']} | {t_batch:.1f} | {t_cube:.1f} | {res['ratio']:.2f} | "
           f"{res['fit_cube_pixels_per_s']:.1f} | {agree:.1e} | {res['peak_rss_bytes'] / 2**20:.0f} | "
           f"{load0[0]:.1f}–{load1[0]:.1f} |\n")
+    if res["workers"]:
+        one = next((w for w in res["workers"] if w["n_workers"] == 1), None)
+        md += ("\nThe same fit_cube on a LocalCluster of single-threaded worker processes "
+               f"(memory limit {a.memory_limit} each; compile inside each worker included):\n\n"
+               "| workers | fit_cube s | px/s | parallel efficiency vs 1 worker | maps vs fit_batch | "
+               "worker peak RSS MB | load avg |\n| --- | --- | --- | --- | --- | --- | --- |\n")
+        for w in res["workers"]:
+            eff = "—" if one is None else f"{one['fit_cube_s'] / (w['n_workers'] * w['fit_cube_s']):.2f}"
+            md += (f"| {w['n_workers']} | {w['fit_cube_s']:.1f} | {w['pixels_per_s']:.1f} | {eff} | "
+                   f"{w['max_rel_diff_maps_vs_fit_batch']:.1e} | {w['worker_peak_rss_bytes'] / 2**20:.0f} | "
+                   f"{w['loadavg_before'][0]:.1f}–{w['loadavg_after'][0]:.1f} |\n")
     (RESULTS / "cube.md").write_text(md)
     print(json.dumps(res, indent=2))
     print(md)
     if not a.dir:
         shutil.rmtree(work, ignore_errors=True)
     return res
+
+
+def _on_cluster(n_workers: int, memory_limit: str, obj, lazy, work: Path, a, ref, pixels: int) -> dict:
+    """``fit_cube`` of the same job on a LocalCluster of ``n_workers`` single-threaded processes."""
+    import json as _json
+
+    import numpy as np
+    from distributed import Client, LocalCluster
+
+    from fitting._cube import fit_cube
+
+    out = work / f"maps_{n_workers}w.zarr"
+    shutil.rmtree(out, ignore_errors=True)
+    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, memory_limit=memory_limit,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        load0 = os.getloadavg()
+        t0 = time.perf_counter()
+        maps = fit_cube(obj, lazy, out=out, chunk=tuple(a.chunk), chunk_size=a.chunk_size, client=client,
+                        resume=False, progress=False).load()
+        seconds = time.perf_counter() - t0
+        load1 = os.getloadavg()
+        rss = max(client.run(_peak_rss).values())
+    status = maps["status"].values.ravel()
+    names = _json.loads(maps.attrs["parameter_variables"])
+    x = np.stack([maps[n].values.ravel()[status == 0] for n in names], axis=1)
+    agree = float(np.max(np.abs(x - ref.x) / np.maximum(np.abs(ref.x), 1e-300)))
+    return {"n_workers": n_workers, "memory_limit": memory_limit, "fit_cube_s": seconds, "pixels_per_s": pixels / seconds,
+            "max_rel_diff_maps_vs_fit_batch": agree, "worker_peak_rss_bytes": rss, "loadavg_before": load0,
+            "loadavg_after": load1}
 
 
 if __name__ == "__main__":

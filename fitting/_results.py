@@ -504,9 +504,10 @@ def _plain_residuals(objective: Objective, model, data) -> list:
     and shapes and kept with it (op by op, the Δ wrap alone cost milliseconds per fit)."""
     import jax
 
-    fn = objective.__dict__.get("_plain_residuals")
+    cache = objective.__dict__.setdefault("_compiled", {})  # with its solvers (fitting._solve.compiled_cache)
+    fn = cache.get("plain_residuals")
     if fn is None:
-        fn = objective.__dict__["_plain_residuals"] = jax.jit(
+        fn = cache["plain_residuals"] = jax.jit(
             lambda ms, ds: tuple(objective.residual_of(i, m, d) for i, (m, d) in enumerate(zip(ms, ds))))
     return [np.asarray(r) for r in fn(tuple(model), tuple(data))]
 

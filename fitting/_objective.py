@@ -36,9 +36,8 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax._custom_types import RealLike
-from layerstack_jax import (DEFAULT_NODES, ColourSpace, Ellipsometric, Geometry, LambertianBackground,
-                            LayerstackError, LayerstackWarning, Stack, ellipsometry, fixed_optics, reflectance)
-from layerstack_jax._validate import is_concrete
+from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LambertianBackground, LayerstackError,
+                            LayerstackWarning, Stack, ellipsometry, fixed_optics, reflectance)
 from layerstack_jax._stack import TabulatedSpectrum
 
 from ._parameters import Layout, Parameter, resolve_parameter
@@ -62,30 +61,16 @@ def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None, colour=No
     return spectrum if colour is None else colour.Lab(spectrum)
 
 
-#: What an ideal :class:`~layerstack_jax.Ellipsometric` reads, from one
-#: :class:`~layerstack_jax.Ellipsometry` (its ``measure`` and ``reading`` for the ideal instrument).
-_IDEAL_READINGS = {
-    "psi": lambda e: e.psi_deg, "delta": lambda e: e.delta_deg, "N": lambda e: e.N, "C": lambda e: e.C,
-    "S": lambda e: e.S, "depolarization": lambda e: jnp.zeros_like(e.psi_deg),
-    "rho_re": lambda e: jnp.real(e.rho), "rho_im": lambda e: jnp.imag(e.rho),
-}
-
-
-def _shared_ellipsometer(g: Geometry, colour) -> Optional[float]:
-    """The angle (degrees) of an ideal single-angle :class:`~layerstack_jax.Ellipsometric`
-    reading (no bandwidth, spread or offset: concretely zero), whose model is
-    :func:`layerstack_jax.ellipsometry` on the model grid; None for any other geometry.
+def _shared_ellipsometer(g: Geometry, stack: Stack, colour) -> Optional[float]:
+    """The angle (degrees) of a reading that is one field of :func:`layerstack_jax.ellipsometry`
+    of ``stack`` (the geometry says so: :meth:`~layerstack_jax.Geometry.ellipsometry_angle`),
+    None for any other reading or a CIELAB one.
 
     Several such datasets (ψ and Δ, several angles) read one stack: :meth:`Objective.predict`
     computes them with one :func:`~layerstack_jax.ellipsometry` call over their angles instead
     of one call per dataset (the same per-angle arithmetic; a compiled fit then holds one copy of
     the model instead of one per dataset)."""
-    if type(g) is not Ellipsometric or colour is not None or not g.ideal or g.quantity not in _IDEAL_READINGS:
-        return None
-    a = g.angle_deg
-    if not is_concrete(a) or np.ndim(a) != 0:
-        return None
-    return float(np.asarray(a))
+    return None if colour is not None else g.ellipsometry_angle(stack)
 
 
 def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
@@ -541,7 +526,7 @@ class Objective:
         geometries = self.layout.inject_geometries([ds.geometry for ds in self.datasets], coefficients)
 
         # ideal single-angle ellipsometer readings: one ellipsometry() over their angles
-        angle = {i: _shared_ellipsometer(geometries[i], self.datasets[i].colour) for i in coated}
+        angle = {i: _shared_ellipsometer(geometries[i], self.stack, self.datasets[i].colour) for i in coated}
         angles = sorted({a for a in angle.values() if a is not None})
         if sum(a is not None for a in angle.values()) < 2:
             angles = []  # nothing to share: the dataset's own reading, as below
@@ -550,7 +535,7 @@ class Objective:
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
             e = ellipsometry(st, grid, np.asarray(angles)) if angles else None
-            return tuple(_IDEAL_READINGS[geometries[i].quantity](e)[angles.index(angle[i])]
+            return tuple(geometries[i].from_ellipsometry(e)[angles.index(angle[i])]
                          if angles and angle[i] is not None
                          else _measure(st, grid, geometries[i], nodes, optics[i], self.datasets[i].colour)
                          for i in coated)

@@ -620,6 +620,25 @@ class Ellipsometric(Geometry):
         """True when every non-ideality is concretely 0: the reading is :func:`ellipsometry`'s."""
         return all(self._is_zero(n) for n in ("angle_offset_deg", "bandwidth_nm", "thickness_spread"))
 
+    def ellipsometry_angle(self, stack: Stack) -> Optional[float]:
+        """The angle (degrees) when this reading is :func:`ellipsometry`'s: the ideal instrument,
+        in reflection, on a coherent stack, at one concrete angle (:meth:`Geometry.ellipsometry_angle`);
+        else None (transmission, thick layers, non-idealities read through :meth:`reading`)."""
+        a = self.angle_deg
+        if (self.mode != "reflection" or not is_coherent(stack) or not self.ideal or not is_concrete(a)
+                or np.ndim(a) != 0):
+            return None
+        return float(np.asarray(a))
+
+    def from_ellipsometry(self, e: Ellipsometry):
+        """The quantity read, from :func:`ellipsometry` at :meth:`ellipsometry_angle` (the same
+        numbers as :meth:`measure` of the ideal instrument)."""
+        if self.quantity in ("rho_re", "rho_im"):
+            return jnp.real(e.rho) if self.quantity == "rho_re" else jnp.imag(e.rho)
+        if self.quantity == "depolarization":
+            return jnp.zeros_like(e.psi_deg)
+        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
+
     def _coherent_ellipsometry(self, stack: Stack, wavelength_nm, angle) -> Ellipsometry:
         """The ideal reading of a coherent stack from its amplitudes: :func:`ellipsometry`, or the
         same of :math:`(t_s, t_p)` in transmission."""

@@ -127,3 +127,27 @@ def test_give_up_rule_and_abandoned_starts(objective):
     assert int(same.status) == int(plain.status) == 0
     cut = fn(y0, objective.args(), objective.optics, (3, 0.5 * cost))
     assert int(cut.status) == ABANDONED and int(cut.num_steps) == 3
+
+
+def test_shared_ellipsometer_reading_only_where_it_is_ellipsometry():
+    """The objective reads several ideal ellipsometer datasets of one stack with one
+    ``ellipsometry()`` — and only those: a transmission ellipsometer or a stack with a thick
+    substrate (depolarizing backside) is read by each dataset's own ``measure`` (a shared
+    reflection call gave transmission datasets reflection numbers, and refused thick stacks)."""
+    import layerstack_jax as ls
+
+    wl = np.linspace(400.0, 700.0, 7)
+    film = ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.46, 0.004), 120.0, name="film")], ls.Substrate(1.5))
+    slide = ls.Stack(1.0, [ls.Layer(1.6, 80.0, name="film"), ls.Layer(1.5, 1e6, coherent=False, name="glass")],
+                     ls.Substrate(1.0))
+    cases = [(film, "reflection"), (film, "transmission"), (slide, "reflection"), (slide, "transmission")]
+    for stack, mode in cases:
+        gs = [ls.Ellipsometric(a, q, mode=mode) for a in (50.0, 60.0) for q in ("psi", "delta")]
+        expect = [np.asarray(g.measure(stack, wl)) for g in gs]
+        obj = ft.Objective(stack, wl, [ft.Dataset(g, y, sigma=0.01) for g, y in zip(gs, expect)],
+                           [ft.thickness("film")])
+        got = obj.predict(obj.layout.x0)
+        for g, y, m in zip(gs, expect, got):
+            np.testing.assert_allclose(np.asarray(m)[0], y, rtol=1e-12, atol=1e-12, err_msg=f"{g.label} {mode}")
+        shared = [g.ellipsometry_angle(stack) for g in gs]
+        assert (all(a is not None for a in shared)) == (stack is film and mode == "reflection")

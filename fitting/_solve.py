@@ -326,15 +326,23 @@ def jacobian_with_statistics(objective: Objective):
         r, aux = evaluate(u, args_optics)
         J = aux[1]
         out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ (jax.jacfwd(z_of)(u) @ du)
-        if not all(isinstance(t, SymbolicZero) for t in jax.tree.leaves(
-                dargs, is_leaf=lambda t: isinstance(t, SymbolicZero))):
-            dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if isinstance(t, SymbolicZero) else t, dargs,
-                                 args_optics, is_leaf=lambda t: isinstance(t, SymbolicZero))
-            out = out + jax.jvp(lambda a: parts(z_of(u), *a)[0], (args_optics,), (dargs,))[1]
+        out = _with_args_tangent(out, lambda a: parts(z_of(u), *a)[0], args_optics, dargs)
         return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
 
     g.defjvp(g_jvp, symbolic_zeros=True)
     return g
+
+
+def _with_args_tangent(out, of_args: Callable, args, dargs):
+    """``out`` plus the exact JVP of ``of_args`` at ``args`` along ``dargs`` (symbolic zeros
+    among them made concrete), or ``out`` itself when every tangent of ``args`` is a symbolic
+    zero (always, in the solvers): the ``args`` part of the custom JVPs of
+    :func:`jacobian_with_statistics` and :func:`dense_jacobian`."""
+    is_zero = lambda t: isinstance(t, SymbolicZero)  # noqa: E731
+    if all(is_zero(t) for t in jax.tree.leaves(dargs, is_leaf=is_zero)):
+        return out
+    dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if is_zero(t) else t, dargs, args, is_leaf=is_zero)
+    return out + jax.jvp(of_args, (args,), (dargs,))[1]
 
 
 def dense_jacobian(fn):
@@ -360,12 +368,7 @@ def dense_jacobian(fn):
 
         J, r = jax.jacfwd(value_twice, has_aux=True)(u)
         out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ du
-        if not all(isinstance(t, SymbolicZero) for t in jax.tree.leaves(
-                dargs, is_leaf=lambda t: isinstance(t, SymbolicZero))):
-            dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if isinstance(t, SymbolicZero) else t, dargs, args,
-                                 is_leaf=lambda t: isinstance(t, SymbolicZero))
-            out = out + jax.jvp(lambda a: fn(u, a), (args,), (dargs,))[1]
-        return r, out
+        return r, _with_args_tangent(out, lambda a: fn(u, a), args, dargs)
 
     g.defjvp(g_jvp, symbolic_zeros=True)
     return g

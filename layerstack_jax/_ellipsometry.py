@@ -631,8 +631,9 @@ class Ellipsometric(Geometry):
         return float(np.asarray(a))
 
     def from_ellipsometry(self, e: Ellipsometry):
-        """The quantity read, from :func:`ellipsometry` at :meth:`ellipsometry_angle` (the same
-        numbers as :meth:`measure` of the ideal instrument)."""
+        """The quantity read, from the ideal instrument's :class:`Ellipsometry` of a coherent
+        stack (:func:`ellipsometry` at :meth:`ellipsometry_angle`, or its transmission twin):
+        what :meth:`measure` returns for the ideal instrument."""
         if self.quantity in ("rho_re", "rho_im"):
             return jnp.real(e.rho) if self.quantity == "rho_re" else jnp.imag(e.rho)
         if self.quantity == "depolarization":
@@ -669,9 +670,8 @@ class Ellipsometric(Geometry):
     def measure(self, stack: Stack, wavelength_nm, *, nodes: int = 0, optics=None) -> Float[Array, "*angle wl"]:
         """The quantity read for ``stack`` on ``wavelength_nm`` (nm); ``nodes`` and ``optics``
         are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
-        if self.ideal and is_coherent(stack) and self.quantity in ("rho_re", "rho_im"):
-            rho = self._coherent_ellipsometry(stack, wavelength_nm, self.angle_deg).rho
-            return jnp.real(rho) if self.quantity == "rho_re" else jnp.imag(rho)
+        if self.ideal and is_coherent(stack):  # the amplitudes' ratio itself (reflection or transmission)
+            return self.from_ellipsometry(self._coherent_ellipsometry(stack, wavelength_nm, self.angle_deg))
         e = self.reading(stack, wavelength_nm)
         if self.quantity in ("rho_re", "rho_im"):
             t, d = jnp.tan(jnp.deg2rad(e.psi_deg)), jnp.deg2rad(e.delta_deg)

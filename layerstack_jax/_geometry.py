@@ -551,6 +551,17 @@ class Sphere(Geometry):
         return A, d.r, prepare
 
 
+#: (axis field, aperture half-angle field) of a radiance-detector geometry (Directional, BRDF)
+_APERTURES = (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg"))
+
+
+def _check_apertures(name: str, g) -> None:
+    """Each non-zero aperture of ``g`` (Directional, BRDF) a cone above the horizon (eager and under jit)."""
+    for axis, half in _APERTURES:
+        if not _is_zero(getattr(g, half)):
+            check_cone(f"{name}.{half} (degrees)", getattr(g, axis), getattr(g, half))
+
+
 class Directional(Geometry):
     r"""Radiance detector: reflectance factor against a perfect white diffuser (Simonot eq. 79),
     illumination at ``incidence_deg``, viewing at ``viewing_deg`` (45/0, 0/45, …).
@@ -601,9 +612,7 @@ class Directional(Geometry):
         check_angle_deg(f"{name}.viewing_deg", self.viewing_deg)
         if not (isinstance(self.cone_nodes, int) and self.cone_nodes >= 1):
             raise LayerstackError(f"{name}.cone_nodes must be an int >= 1, got {self.cone_nodes!r}")
-        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
-            if not _is_zero(getattr(self, half)):
-                check_cone(f"{name}.{half} (degrees)", getattr(self, axis), getattr(self, half))
+        _check_apertures(name, self)
         _check_cover(name, self)
 
     def _seen(self, rs):
@@ -613,7 +622,7 @@ class Directional(Geometry):
         """((θ, β or None) of the illumination, of the viewing), checked; β None: a point."""
         name = type(self).__name__
         out = []
-        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
+        for axis, half in _APERTURES:
             theta = check_angle_deg(f"{name}.{axis}", getattr(self, axis))
             beta = None if _is_zero(getattr(self, half)) else check_cone(f"{name}.{half} (degrees)", theta,
                                                                           getattr(self, half))
@@ -699,9 +708,7 @@ class BRDF(Geometry):
     def __check_init__(self):
         check_angle_deg("BRDF.incidence_deg", self.incidence_deg)
         check_angle_deg("BRDF.viewing_deg", self.viewing_deg)
-        for axis, half in (("incidence_deg", "illumination_half_angle_deg"), ("viewing_deg", "viewing_half_angle_deg")):
-            if not _is_zero(getattr(self, half)):
-                check_cone(f"BRDF.{half} (degrees)", getattr(self, axis), getattr(self, half))
+        _check_apertures("BRDF", self)
         _check_cover("BRDF", self)
 
     def _factor(self) -> Directional:

@@ -298,10 +298,14 @@ def test_measured_si3n4_on_bf33_wafer_fits_better_with_its_backside():
 
     Observed (documented in the report of this change): χ² 1.81e4 → 1.68e4 (−7 %) with the
     backside, 8.6e3 with the film on both faces — whose back thickness comes out within 1 % of the
-    front one (834 vs 839 nm). The file's Δ is mirrored (Δ → −Δ) before the fit: in the
-    library's convention its fringes' Δ excursions run the opposite way (a fit of the ψ-best film
-    misses the file's Δ by 19.9° rms as filed, 9.5° mirrored). Residuals stay at a few degrees
-    (the Cauchy film is not the whole story), so the test asserts the ranking only.
+    front one (834 vs 839 nm; the source documents ~874 nm, pyElli PR #191). The file's Δ is
+    mirrored (Δ → −Δ) before the fit: in the library's convention its fringes' Δ excursions run
+    the opposite way (a fit of the ψ-best film misses the file's Δ by 19.9° rms as filed, 9.5°
+    mirrored), unlike the other Accurion files, nulling and spectroscopic, which follow the
+    library's convention as filed (evidence: examples/data/README.md, "The Accurion spectroscopic
+    file's Δ"): a property of this file, not of the format, so the reader does not flip it.
+    Residuals stay at a few degrees (the Cauchy film is not the whole story), so the test asserts
+    the ranking only.
     """
     import fitting as ft
     from layerstack_jax import io

@@ -219,7 +219,8 @@ class LookupTable:
 
 def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int = 128,
               progress: Union[None, bool, Callable[[int, int], None]] = None, max_steps: int = 256,
-              rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, scale_covariance: Optional[bool] = None,
+              rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, sigma_tol: float = 1e-3,
+              scale_covariance: Optional[bool] = None,
               rank_rtol: float = 1e-8, full_results: bool = False, start: str = "objective",
               lookup_size: int = 256) -> BatchResult:
     """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
@@ -228,7 +229,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         objective: the model; its own data are not used, its σ / weights and masks are.
         data: one array per dataset shaped ``(N, samples, wl)`` (``(N, wl)`` for one sample),
             or a single array when the objective has one dataset.
-        method, max_steps, rtol, atol, gtol, scale_covariance, rank_rtol: as :func:`~fitting.fit`.
+        method, max_steps, rtol, atol, gtol, sigma_tol, scale_covariance, rank_rtol: as
+            :func:`~fitting.fit`.
         chunk_size: fits per compiled call (memory bound); N is processed in ⌈N/chunk⌉ calls
             of the same compiled function.
         progress: a callback ``f(done, total)`` called after each chunk, True for a tqdm
@@ -254,7 +256,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     import time
 
     start_time = time.perf_counter()
-    o = SolverOptions(method, rtol, atol, gtol, max_steps)
+    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
     if method in HOST_METHODS:
         raise LayerstackError(
             f"fit_batch: method {method!r} runs on the host one fit at a time; batched fits need a compiled "

@@ -76,7 +76,10 @@ class SolverOptions:
 
     ``rtol``/``atol``: optimistix step and cost tolerances on the unconstrained coordinates;
     ``gtol``: L-BFGS-B tolerance on the projected gradient of :math:`\\tfrac12\\|r\\|^2` (in z);
-    ``max_steps``: iteration limit.
+    ``max_steps``: iteration limit; ``sigma_tol``: the least-squares methods (``lm``,
+    ``gauss-newton``, ``dogleg``) also stop as soon as the Gauss–Newton step still to go is
+    shorter than ``sigma_tol`` standard errors (:func:`gauss_newton_distance`; 0 turns that
+    rule off, leaving optimistix's step and cost test alone).
     """
 
     method: str = "lm"
@@ -84,6 +87,7 @@ class SolverOptions:
     atol: float = 1e-12
     gtol: float = 1e-9
     max_steps: int = 256
+    sigma_tol: float = 1e-3
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -93,6 +97,8 @@ class SolverOptions:
         for name in ("rtol", "atol", "gtol"):
             if not getattr(self, name) > 0:
                 raise LayerstackError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not (isinstance(self.sigma_tol, (int, float, np.floating)) and 0 <= self.sigma_tol < 1):
+            raise LayerstackError(f"sigma_tol must be in [0, 1) standard errors, got {self.sigma_tol!r}")
 
 
 class FitOutput(NamedTuple):
@@ -146,6 +152,82 @@ def _quiet(**kwargs) -> None:
     """No progress output from inside the compiled solve."""
 
 
+def gauss_newton_distance(residual: Float[Array, " M"], jacobian: Float[Array, "M P"], dof: int):
+    r"""``(d², s²)``: the squared length of the Gauss–Newton step still to go, in standard errors
+    of the unscaled covariance, :math:`d^2 = g^\top (J^\top J)^{+} g` with :math:`g = J^\top r`
+    — twice the cost decrease that step predicts, MINUIT's *estimated distance to the minimum*
+    (James & Roos 1975) — and the residuals' variance :math:`s^2 = \|r\|^2/\mathrm{dof}`.
+
+    Directions the data do not determine (eigenvalues of :math:`J^\top J` below 1e-12 of the
+    largest, and the zero columns of components held on a bound) are left out. Invariant under
+    a reparametrisation of the coordinates, so the solvers' coordinates ``u`` serve."""
+    g = jacobian.T @ residual
+    w, V = jnp.linalg.eigh(jacobian.T @ jacobian)
+    kept = w > 1e-12 * jnp.max(w)
+    d2 = jnp.sum(jnp.where(kept, (V.T @ g) ** 2 / jnp.where(kept, w, 1.0), 0.0))
+    return d2, jnp.sum(residual * residual) / max(dof, 1)
+
+
+def near_minimum(state, sigma_tol: float, dof: int):
+    r"""True once the last accepted point of a Gauss–Newton-family solve (optimistix state) is
+    within ``sigma_tol`` standard errors of the minimum: :math:`d^2 \le`
+    ``sigma_tol``\ :sup:`2` :math:`\min(1, s^2)` (:func:`gauss_newton_distance`).
+
+    With σ given, :math:`s^2 \approx 1` and the distance is in the reported standard errors;
+    without σ (unit weights) the factor :math:`s^2` converts it to the scaled ones, and with a
+    σ that is too large (:math:`s^2 < 1`) it is as strict as the smaller errors. Residuals at the
+    round-off level (noise-free data) leave :math:`s^2 \approx 0`: the rule never fires and
+    optimistix's step and cost test ends the solve, as before. Later steps of a statistically
+    converged fit move it by less than ``sigma_tol`` σ — each one a full Jacobian of the model."""
+    r = jnp.concatenate([jnp.ravel(a) for a in jax.tree.leaves(state.f_info.residual)])
+    d2, s2 = gauss_newton_distance(r, state.f_info.jac.as_matrix(), dof)
+    return (state.num_accepted_steps >= 1) & (d2 <= sigma_tol ** 2 * jnp.minimum(1.0, s2))
+
+
+def _stop_near_minimum(solver, state, done, result):
+    """``(done, result)`` of a solve, also done — successfully — when :func:`near_minimum`."""
+    if not solver.sigma_tol:
+        return done, result
+    near = jnp.invert(done) & near_minimum(state, solver.sigma_tol, solver.dof)
+    return done | near, optx.RESULTS.where(near, optx.RESULTS.successful, result)
+
+
+class GaussNewton(optx.AbstractGaussNewton):
+    """:class:`optimistix.GaussNewton` (the same parts: undamped Newton steps, unit learning
+    rate) that also stops near the minimum (:func:`near_minimum`)."""
+
+    rtol: float
+    atol: float
+    sigma_tol: float = 0.0
+    dof: int = 1
+    norm: Callable = optx.max_norm
+    descent: optx.AbstractDescent = optx.NewtonDescent()
+    search: optx.AbstractSearch = optx.LearningRate(1.0)
+    verbose: Callable = _quiet
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        return _stop_near_minimum(self, state, done, result)
+
+
+class Dogleg(optx.AbstractGaussNewton):
+    """:class:`optimistix.Dogleg` (the same parts) that also stops near the minimum
+    (:func:`near_minimum`)."""
+
+    rtol: float
+    atol: float
+    sigma_tol: float = 0.0
+    dof: int = 1
+    norm: Callable = optx.max_norm
+    descent: optx.AbstractDescent = optx.DoglegDescent()
+    search: optx.AbstractSearch = optx.ClassicalTrustRegion()
+    verbose: Callable = _quiet
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        return _stop_near_minimum(self, state, done, result)
+
+
 class LevenbergMarquardt(optx.AbstractGaussNewton):
     """Levenberg–Marquardt composed from optimistix parts, as optimistix documents for custom
     solvers: Gauss–Newton steps damped by :class:`optimistix.DampedNewtonDescent` (QR of the
@@ -153,6 +235,8 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
 
     rtol: float
     atol: float
+    sigma_tol: float = 0.0
+    dof: int = 1
     norm: Callable = optx.max_norm
     descent: optx.AbstractDescent = optx.DampedNewtonDescent(linear_solver=lx.QR())
     search: optx.AbstractSearch = RoundoffTrustRegion()
@@ -164,7 +248,7 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         :math:`\tfrac12\|r\|^2` is still above ``cost`` ends, marked
         ``RESULTS.nonlinear_divergence`` (:data:`fitting._status.ABANDONED`; a result the
         Gauss–Newton family never gives otherwise). A single fit passes :data:`NEVER`."""
-        done, result = super().terminate(fn, y, args, options, state, tags)
+        done, result = _stop_near_minimum(self, state, *super().terminate(fn, y, args, options, state, tags))
         give_up = (options or {}).get("give_up")
         if give_up is None:
             return done, result
@@ -174,13 +258,11 @@ class LevenbergMarquardt(optx.AbstractGaussNewton):
         return done | hopeless, optx.RESULTS.where(hopeless, optx.RESULTS.nonlinear_divergence, result)
 
 
-def _optx_solver(o: SolverOptions):
-    if o.method == "lm":
-        return LevenbergMarquardt(rtol=o.rtol, atol=o.atol)
-    if o.method == "gauss-newton":
-        return optx.GaussNewton(rtol=o.rtol, atol=o.atol)
-    if o.method == "dogleg":
-        return optx.Dogleg(rtol=o.rtol, atol=o.atol)
+def _optx_solver(o: SolverOptions, dof: int):
+    """The optimistix solver of ``o`` for a fit with ``dof`` degrees of freedom."""
+    least_squares = {"lm": LevenbergMarquardt, "gauss-newton": GaussNewton, "dogleg": Dogleg}
+    if o.method in least_squares:
+        return least_squares[o.method](rtol=o.rtol, atol=o.atol, sigma_tol=o.sigma_tol, dof=dof)
     return optx.BFGS(rtol=o.rtol, atol=o.atol)
 
 
@@ -227,7 +309,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
 
         return solve
 
-    solver = _optx_solver(o)
+    solver = _optx_solver(o, objective.n_points - objective.n_parameters)
 
     if o.method == "bfgs":  # BFGS needs only the gradient: plain reverse mode
         def residuals(u, args_optics):
@@ -743,7 +825,7 @@ def bound_note(method: str, names: list, settled: bool, finished: int = 0) -> st
 
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
         max_steps: int = 256, rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9,
-        scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None):
+        sigma_tol: float = 1e-3, scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None):
     """Fit ``objective`` and return a :class:`~fitting.FitResult`.
 
     Args:
@@ -763,7 +845,9 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             best cost after 3× that start's steps is given up (:func:`give_up_rule`, counted
             in ``starts_abandoned``). The converged one with the lowest χ² wins (the first
             of those equal to round-off: ``x0``'s when it found that minimum).
-        max_steps, rtol, atol, gtol: stopping rules (:class:`SolverOptions`).
+        max_steps, rtol, atol, gtol, sigma_tol: stopping rules (:class:`SolverOptions`): the
+            least-squares methods stop when the step test is met or, with noisy data, when the
+            point is within ``sigma_tol`` standard errors of the minimum.
         scale_covariance: scale the covariance by the reduced χ² (σ estimated from the
             residuals); default: True unless every dataset gives σ.
         rank_rtol: singular values of the normalised Jacobian below ``rank_rtol`` × the largest
@@ -775,7 +859,7 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
     for α, dimensionless for n and ρg).
     """
-    o = SolverOptions(method, rtol, atol, gtol, max_steps)
+    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
     if objective.n_parameters == 0:
         raise LayerstackError("the objective has no free parameter")
     if not (isinstance(starts, int) and starts >= 1):

@@ -14,6 +14,15 @@ a 10 µm metal film makes the phase factor underflow to 0, which gives the refle
 bulk metal instead of an overflow (PHYSICS.md, trap 5). A forward transfer matrix would
 contain :math:`e^{-i\phi_j}` and overflow there.
 
+**Forward.** :func:`_packet` runs the recursion film by film in one loop whose step forms the
+film's normal wavevector, the Fresnel coefficients of the interface above it (s and p on one
+axis) and its phase factor: no per-interface or per-film array is stored. Its arithmetic is
+written so that XLA vectorizes it on CPU: complex division as :math:`z\bar w/|w|^2`
+(:func:`~layerstack_jax._fresnel.divide`), the square root in real arithmetic, cosine and sine
+by polynomial (:func:`_cos_sin`): XLA's own complex division (scaled, with special cases),
+complex square root (through atan2, sine and cosine) and float64 sine and cosine (a scalar call
+per element) are each several times slower on CPU. Measured in ``benchmarks/README.md`` (P1).
+
 **Derivative.** The recursion carries a closed-form derivative (a ``jax.custom_jvp``,
 :func:`_rouard_sensitivities`): the sensitivities of (γ, τ) to every film's phase and every
 interface's r, t come from one sweep from the incidence side down over the stored steps, and a
@@ -34,7 +43,7 @@ from jax import lax
 from jax.custom_derivatives import SymbolicZero
 
 from ._custom_types import Array, IndexSpectrum, Inexact
-from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux
+from ._fresnel import fresnel_amplitudes, normal_wavevector, power_flux, divide
 from ._numerics import abs2, as_complex, complex_dtype, safe_divide
 
 __all__ = ["PacketIntensities", "packet_amplitudes", "stack_packets"]
@@ -65,10 +74,16 @@ class PacketIntensities(NamedTuple):
 def _rouard_step(carry, x):
     """One step of the recursion (module docstring): film j and the interface above it;
     ``carry = (γ_{j+1}, τ_{j+1})`` below film j, ``x = (r_j, t_j, e^{iφ_j}, e^{2iφ_j})``."""
-    gamma, tau = carry
-    r_j, t_j, e1, e2 = x
-    den = 1.0 + r_j * gamma * e2
-    return ((r_j + gamma * e2) / den, t_j * tau * e1 / den), None
+    return _rouard_update(*carry, *x), None
+
+
+def _rouard_update(gamma, tau, r_j, t_j, e1, e2):
+    """Hirayama eqs. 3–4 for film j: ``(γ_j, τ_j)`` from ``(γ_{j+1}, τ_{j+1})`` below it, the
+    interface above it ``(r_j, t_j)`` and its phase factors ``e^{iφ_j}, e^{2iφ_j}``
+    (:func:`~layerstack_jax._fresnel.divide`)."""
+    u = gamma * e2
+    den = 1.0 + r_j * u
+    return divide(r_j + u, den), divide(t_j * tau * e1, den)
 
 
 def _loop(step, carry, xs, n: int):
@@ -113,12 +128,59 @@ def _bottom_up(r, t, phase, own_loop: bool = True):
 
 
 def _phase_factor(phi):
-    r""":math:`e^{i\phi}` of a film's phase φ (complex, ``Im φ ≥ 0``), from the real exponential,
-    cosine and sine of its parts (the expansion XLA makes of ``exp(1j * phi)``, written out so
-    that the exponential too is computed once)."""
+    r""":math:`e^{i\phi}` of a film's phase φ (complex, ``Im φ ≥ 0``), from the real exponential
+    of its imaginary part and the cosine and sine of its real part (:func:`_cos_sin`)."""
     magnitude = jnp.exp(-jnp.imag(phi))
-    re = jnp.real(phi)
-    return lax.complex(magnitude * jnp.cos(re), magnitude * jnp.sin(re))
+    cos, sin = _cos_sin(jnp.real(phi))
+    return lax.complex(magnitude * cos, magnitude * sin)
+
+
+# Cody–Waite split of π/2 (fdlibm's pio2_1, pio2_2, pio2_3 for float64: 33 + 33 + 53 bits, so
+# that n·pio2_1 and n·pio2_2 are exact for |n| < 2^20; Cephes' DP1..3 × 2 for float32) and the
+# minimax polynomials of fdlibm's __kernel_sin / __kernel_cos on [-π/4, π/4].
+_PIO2 = {"float64": (1.57079632673412561417e+00, 6.07710050630396597660e-11, 2.02226624871116645580e-21),
+         "float32": (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8)}
+_SIN = (-1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+        2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)
+_COS = (4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+        -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)
+
+
+def _horner(z, coefficients):
+    acc = coefficients[-1]
+    for c in coefficients[-2::-1]:
+        acc = acc * z + c
+    return acc
+
+
+@jax.custom_jvp
+def _cos_sin(x):
+    r"""``(cos x, sin x)`` of a real array, in arithmetic that XLA vectorizes: reduction by
+    n = round(2x/π) with π/2 in three parts (Cody–Waite), fdlibm's kernels on the remainder,
+    the quadrant n mod 4 by selects. XLA's own float64 ``cos`` and ``sin`` on CPU cost ~20× as
+    much (one scalar call per element), and every film needs both at every (angle, λ) point
+    (P1: 1.3 million pairs per evaluation). Within 2.2 ulp (|x| ≤ 1e6; absolute error
+    ≤ 1.5e-16) of the correctly rounded values in float64, 6e-8 in float32; for |x| beyond
+    ~1.6e6 (2^20 · π/2) the reduction loses ~|x|·1e-16 absolute, the size of the rounding
+    error the phase itself carries there."""
+    p = _PIO2["float64" if x.dtype == jnp.float64 else "float32"]
+    n = jnp.round(x * (2 / np.pi))
+    r = ((x - n * p[0]) - n * p[1]) - n * p[2]
+    z = r * r
+    sin = r + r * z * _horner(z, _SIN)
+    half = 0.5 * z
+    w = 1.0 - half
+    cos = w + (((1.0 - w) - half) + z * z * _horner(z, _COS))
+    quadrant = n.astype(jnp.int32) & 3
+    return (jnp.select([quadrant == 0, quadrant == 1, quadrant == 2], [cos, -sin, -cos], sin),
+            jnp.select([quadrant == 0, quadrant == 1, quadrant == 2], [sin, cos, -sin], -cos))
+
+
+@_cos_sin.defjvp
+def _cos_sin_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    cos, sin = _cos_sin(x)
+    return (cos, sin), (-sin * dx, cos * dx)
 
 
 def _kept_step(need_t: bool):
@@ -266,6 +328,119 @@ def _lift_branch_point(q):
     return jnp.where(jnp.abs(q) < eps, eps + 0j, q).astype(q.dtype)
 
 
+def _film_wavevector(n, s):
+    """Normal wavevector of a film (:func:`~layerstack_jax._fresnel.normal_wavevector`) lifted
+    off its branch point (:func:`_lift_branch_point`)."""
+    return _lift_branch_point(normal_wavevector(n, s))
+
+
+def _film_phase(q, d, wavelength):
+    r"""Phase :math:`\phi = 2\pi q d/\lambda` of a film of thickness ``d`` (nm) at vacuum
+    wavelength λ (nm) (Hirayama eq. 24); complex, the broadcast shape of the three."""
+    return as_complex(2 * jnp.pi / wavelength, q) * q * as_complex(d, q)
+
+
+def _film_step(gamma, tau, e1, n_i, q_i, n_f, q_f):
+    r"""Film f and the interface above it in one step: the Fresnel coefficients of the interface
+    from medium i into film f (:func:`~layerstack_jax._fresnel.fresnel_amplitudes`) and the
+    Rouard update (:func:`_rouard_update`) with the film's phase factor
+    :math:`e^{i\phi_f}` (``e1``). ``gamma``, ``tau``: ``(2, *B)``, below the film."""
+    r, t = fresnel_amplitudes(n_i, q_i, n_f, q_f)
+    return _rouard_update(gamma, tau, r, t, e1, e1 * e1)
+
+
+@jax.custom_jvp
+def _packet(n, q_ends, d, s, wavelength):
+    r"""Composite :math:`(\gamma, \tau)` ``(2, *B)`` of a packet (Hirayama eqs. 1–4), film by film
+    from the exit medium up: each step forms the normal wavevector of the film above, the
+    Fresnel coefficients of the interface between them and that film's phase factor inside the
+    loop (:func:`_film_step`), so that nothing is stored per interface or per film — only the
+    running (γ, τ), the last normal wavevector and the next phase factor. The same values as
+    :func:`_rouard` on the stored coefficients (:func:`_stored_coefficients`: to a few ulp);
+    its derivative is that of :func:`_rouard` (:func:`_packet_jvp`).
+
+    On P1 (10 films, 64 angles × 1000 λ) the stored form moved ~700 MB through memory
+    (broadcast indices, r and t of every interface, their reversed copies); this one keeps five
+    arrays of ``(*B)`` (two of ``(2, *B)``) live across steps. The loop is a ``lax.scan`` for
+    any number of films: unrolled, XLA fuses consecutive steps into kernels that recompute or
+    store their shared terms (P1 3× slower in a trial).
+
+    Args:
+        n: ``(F + 2, *Bn)`` complex indices ``[incidence, film_1, …, film_F, exit]`` (F ≥ 1).
+        q_ends: ``(2, *Bq)`` normal wavevectors of the incidence and exit media.
+        d: ``(F, *Bd)`` film thicknesses (nm).
+        s: Snell invariant; wavelength: vacuum wavelength (nm). All of the same rank.
+    """
+    films = n.shape[0] - 2
+    shape = jnp.broadcast_shapes(q_ends.shape[1:], d.shape[1:], jnp.shape(wavelength))
+    q_last = _film_wavevector(n[films], s)
+    r, t = fresnel_amplitudes(n[films], q_last, n[-1], q_ends[1])
+    e1 = jnp.broadcast_to(_phase_factor(_film_phase(q_last, d[-1], wavelength)), shape)
+    carry = (jnp.broadcast_to(r, (2, *shape)), jnp.broadcast_to(t, (2, *shape)), n[films], q_last, e1)
+
+    def step(carry, x):  # film f (its phase factor e1 carried) and the film above it, i
+        gamma, tau, n_f, q_f, e1 = carry
+        n_i, d_i = x
+        q_i = _film_wavevector(n_i, s)
+        gamma, tau = _film_step(gamma, tau, e1, n_i, q_i, n_f, q_f)
+        return (gamma, tau, n_i, q_i, jnp.broadcast_to(_phase_factor(_film_phase(q_i, d_i, wavelength)), shape)), None
+
+    if films > 1:
+        carry, _ = lax.scan(step, carry, (n[1:films][::-1], d[:-1][::-1]))
+    gamma, tau, n_f, q_f, e1 = carry
+    return _film_step(gamma, tau, e1, n[0], q_ends[0], n_f, q_f)
+
+
+def _stored_coefficients(n, q_ends, d, s, wavelength):
+    """The inputs ``(r, t, phase)`` of :func:`_rouard` for the packet of :func:`_packet`: the
+    Fresnel coefficients of all its interfaces ``(F+1, 2, *B)`` and its films' phases
+    ``(F, 1, *B)``, stored."""
+    q_films = _film_wavevector(n[1:-1], s)
+    q = jnp.concatenate([q_ends[:1], q_films, q_ends[1:]])
+    r, t = fresnel_amplitudes(n[:-1], q[:-1], n[1:], q[1:])  # (2, F+1, *Bq)
+    phase = _film_phase(q_films, d, wavelength)[:, None]  # (F, 1, *B)
+    shape = (r.shape[1], 2, *phase.shape[2:])
+    return jnp.broadcast_to(jnp.moveaxis(r, 0, 1), shape), jnp.broadcast_to(jnp.moveaxis(t, 0, 1), shape), phase
+
+
+def _packet_jvp(primals, tangents):
+    """Derivative of :func:`_packet`: the closed form of :func:`_rouard` (its custom JVP) on the
+    stored coefficients, whose own tangents come from those of the inputs that have one
+    (the others stay symbolic zeros, so a thickness tangent costs the phase sweep only)."""
+    live = [i for i, dx in enumerate(tangents) if not isinstance(dx, SymbolicZero)]
+
+    def through_stored(*xs):
+        args = list(primals)
+        for i, x in zip(live, xs):
+            args[i] = x
+        return _rouard(*_stored_coefficients(*args))
+
+    if not live:
+        out = through_stored()
+        return out, jax.tree_util.tree_map(jnp.zeros_like, out)
+    return jax.jvp(through_stored, tuple(primals[i] for i in live), tuple(tangents[i] for i in live))
+
+
+_packet.defjvp(_packet_jvp, symbolic_zeros=True)
+
+
+def _stacked_indices(n: Sequence, *others):
+    """The indices stacked ``(media, *Bn)`` as complex, Bn their own broadcast shape with unit
+    axes up to the rank of ``others`` (Snell invariant, wavelength, thicknesses): nothing is
+    broadcast over angles or wavelengths here; the normal wavevectors and phases are."""
+    rank = len(jnp.broadcast_shapes(*(jnp.shape(x) for x in others)))
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in n), (1,) * rank)
+    dtype = complex_dtype(*n, jnp.complex64)
+    return jnp.stack([jnp.broadcast_to(jnp.asarray(x).astype(dtype), shape) for x in n])
+
+
+def _stacked_thicknesses(d: Sequence, rank: int):
+    """Film thicknesses (nm) stacked ``(F, *Bd)``, Bd their broadcast shape with unit axes up to
+    ``rank``."""
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in d), (1,) * rank)
+    return jnp.stack([jnp.broadcast_to(jnp.asarray(x), shape) for x in d])
+
+
 def packet_amplitudes(n: Sequence[IndexSpectrum], d: Sequence, s, wavelength):
     r"""Composite amplitude reflection and transmission coefficients :math:`(\gamma, \tau)` of a
     coherent packet illuminated from its first medium (Hirayama et al. eqs. 1–4).
@@ -327,13 +502,14 @@ def stack_packets(n: Sequence[IndexSpectrum], d: Sequence, bounds: Sequence[int]
     recursion on the reversed packet; with an absorbing film ``R_back != R_front`` while
     ``T_back == T_front`` for real outer media (reciprocity, Simonot eq. 44).
 
-    The normal wavevectors, Fresnel coefficients and power fluxes of all media and interfaces
-    are computed in one vectorized pass (front and back), so a stack of many thick layers
-    compiles to a few kernels instead of a few per interface (P2 benchmark: 63 instead of 204,
-    0.8 s instead of 1.9 s of XLA compilation); only packets that hold films run their own
-    Rouard recursion. The price: all interfaces share one shape, so when one medium is
-    dispersive the interfaces between dispersionless media are computed per wavelength too
-    (Fresnel algebra only; a fit computes it once, see :func:`layerstack_jax.fixed_optics`).
+    The normal wavevectors and power fluxes of the thick and outer media and the Fresnel
+    coefficients of the bare interfaces between them are computed in one vectorized pass (front
+    and back), so a stack of many thick layers compiles to a few kernels instead of a few per
+    interface (P2 benchmark: 63 instead of 204, 0.8 s instead of 1.9 s of XLA compilation).
+    The price: those interfaces share one shape, so when one medium is dispersive the others
+    are computed per wavelength too (Fresnel algebra only; a fit computes it once, see
+    :func:`layerstack_jax.fixed_optics`). Packets that hold films run :func:`_packet`, which
+    forms its films' wavevectors and coefficients inside its own loop.
 
     Args:
         n: complex indices of all media (ambient, layers…, exit), each broadcastable to ``*B``.
@@ -346,32 +522,33 @@ def stack_packets(n: Sequence[IndexSpectrum], d: Sequence, bounds: Sequence[int]
     Returns:
         ``(packets, q)``: a tuple of :class:`PacketIntensities` (fields ``(2, *B)``, backs None
         unless ``both_sides``), one per pair of consecutive bounds, and the normal wavevectors
-        of all media ``(media, *B)``.
+        of the media at ``bounds`` ``(len(bounds), *B)``.
     """
-    n_arr = _media(n, s)
-    q = normal_wavevector(n_arr, s)
-    films = np.array([i for i in range(1, len(n) - 1) if i not in bounds], dtype=int)
-    if films.size:
-        q = q.at[films].set(_lift_branch_point(q[films]))
-    flux = power_flux(n_arr, q)  # (2, media, *B)
-    r_f, t_f = fresnel_amplitudes(n_arr[:-1], q[:-1], n_arr[1:], q[1:])  # (2, interface, *B)
-    R_f, T_f = abs2(r_f), safe_divide(abs2(t_f) * flux[:, 1:], flux[:, :-1])
-    if both_sides:
-        r_b, t_b = fresnel_amplitudes(n_arr[1:], q[1:], n_arr[:-1], q[:-1])
-        R_b, T_b = abs2(r_b), safe_divide(abs2(t_b) * flux[:, :-1], flux[:, 1:])
+    n_arr = _stacked_indices(n, s, wavelength, *d)
+    q = normal_wavevector(n_arr[np.asarray(bounds)], s)  # (bounds, *B): the thick and outer media
+    flux = power_flux(n_arr[np.asarray(bounds)], q)  # (2, bounds, *B)
+    # bare interfaces (no film between two thick media), all in one vectorized pass
+    bare = np.array([k for k in range(len(bounds) - 1) if bounds[k + 1] == bounds[k] + 1], dtype=int)
+    if bare.size:
+        n_i, n_f = n_arr[np.asarray(bounds)[bare]], n_arr[np.asarray(bounds)[bare] + 1]
+        r_f, t_f = fresnel_amplitudes(n_i, q[bare], n_f, q[bare + 1])  # (2, bare, *B)
+        R_f, T_f = abs2(r_f), safe_divide(abs2(t_f) * flux[:, bare + 1], flux[:, bare])
+        if both_sides:
+            r_b, t_b = fresnel_amplitudes(n_f, q[bare + 1], n_i, q[bare])
+            R_b, T_b = abs2(r_b), safe_divide(abs2(t_b) * flux[:, bare], flux[:, bare + 1])
     packets = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
+    for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
         if b == a + 1:  # a bare interface
-            backs = (R_b[:, a], T_b[:, a]) if both_sides else (None, None)
-            packets.append(PacketIntensities(R_f[:, a], T_f[:, a], *backs))
+            i = int(np.searchsorted(bare, k))
+            backs = (R_b[:, i], T_b[:, i]) if both_sides else (None, None)
+            packets.append(PacketIntensities(R_f[:, i], T_f[:, i], *backs))
             continue
-        film_d = tuple(d[a : b - 1])
-        gamma, tau = _packet_recursion(r_f[:, a:b], t_f[:, a:b], q[a + 1 : b], film_d, wavelength)
-        front = (abs2(gamma), safe_divide(abs2(tau) * flux[:, b], flux[:, a]))
+        film_d = _stacked_thicknesses(d[a : b - 1], n_arr.ndim - 1)
+        gamma, tau = _packet(n_arr[a : b + 1], q[k : k + 2], film_d, s, wavelength)
+        front = (abs2(gamma), safe_divide(abs2(tau) * flux[:, k + 1], flux[:, k]))
         backs = (None, None)
         if both_sides:  # the reversed packet: interfaces b-1 … a seen from their far side
-            gamma, tau = _packet_recursion(r_b[:, a:b][:, ::-1], t_b[:, a:b][:, ::-1], q[a + 1 : b][::-1],
-                                           film_d[::-1], wavelength)
-            backs = (abs2(gamma), safe_divide(abs2(tau) * flux[:, a], flux[:, b]))
+            gamma, tau = _packet(n_arr[a : b + 1][::-1], q[k : k + 2][::-1], film_d[::-1], s, wavelength)
+            backs = (abs2(gamma), safe_divide(abs2(tau) * flux[:, k], flux[:, k + 1]))
         packets.append(PacketIntensities(*front, *backs))
     return tuple(packets), q

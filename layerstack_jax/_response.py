@@ -49,7 +49,7 @@ def stack_interfaces(rs: ResolvedStack, s, *, both_sides: bool = True) -> Interf
     # whatever is not used by the caller.
     sides = both_sides or len(thick) > 2
     packets, q = stack_packets(rs.n, rs.d, thick, s, rs.wavelength, both_sides=sides)
-    paths = tuple(slant_path(rs.n[a], q[a]) for a in thick[1:-1])
+    paths = tuple(slant_path(rs.n[a], q[k]) for k, a in enumerate(thick[1:-1], start=1))  # q of thick media only
     return Interfaces(packets, paths)
 
 

@@ -37,7 +37,7 @@ import numpy as np
 
 from ._custom_types import Coefficients, TableColumn
 from ._materials import Material, Tabulated, _complex
-from ._validate import LayerstackError, check_nonnegative, is_concrete
+from ._validate import LayerstackError, check_nonnegative, check_wavelength_range, is_concrete
 
 __all__ = ["material", "material_sources", "DatabaseFormula", "database_version"]
 
@@ -268,19 +268,6 @@ def _formula_n(kind: int, C, lam_um):
     raise LayerstackError(f"unknown refractiveindex.info dispersion formula {kind}")
 
 
-def _range_checked(x, lo: float, hi: float, name: str):
-    """Wavelengths inside [lo, hi] nm (tolerance 1e-9 nm); an error otherwise (concrete or in jit)."""
-    if is_concrete(x):
-        w = np.asarray(x)
-        if np.any(w < lo - 1e-9) or np.any(w > hi + 1e-9):
-            raise LayerstackError(
-                f"{name}: wavelengths {w.min():g}–{w.max():g} nm outside the data range {lo:g}–{hi:g} nm"
-            )
-        return jnp.asarray(x)
-    x = jnp.asarray(x)
-    return eqx.error_if(x, (x < lo - 1e-9) | (x > hi + 1e-9), f"{name}: wavelengths outside the data range {lo:g}–{hi:g} nm")
-
-
 class DatabaseFormula(Material):
     """A refractiveindex.info dispersion formula (n from formula 1–9, λ in µm inside), with
     an optional tabulated k (linearly interpolated; k = 0 without one).
@@ -314,7 +301,7 @@ class DatabaseFormula(Material):
         return (float(self.range_nm[0]), float(self.range_nm[1]))
 
     def __call__(self, wavelength_nm):
-        x = _range_checked(wavelength_nm, *self.range_nm, self.name)
+        x = check_wavelength_range(self.name, wavelength_nm, *self.range_nm)
         n = _formula_n(self.kind, self.coefficients, x * 1e-3)
         if self.k is None:
             return _complex(n, 0.0)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ._custom_types import Coefficients, RealLike, TableColumn
 from ._numerics import complex_from
-from ._validate import LayerstackError, check_finite, check_nonnegative, is_concrete
+from ._validate import LayerstackError, check_finite, check_nonnegative, check_wavelength_range, is_concrete
 
 __all__ = ["Material", "Index", "Cauchy", "Sellmeier", "Tabulated", "as_material"]
 
@@ -150,21 +150,7 @@ class Tabulated(Material):
 
     def __call__(self, wavelength_nm):
         table = np.asarray(self.wavelength_nm)
-        if is_concrete(wavelength_nm):
-            w = np.asarray(wavelength_nm)
-            if np.any(w < table[0] - 1e-9) or np.any(w > table[-1] + 1e-9):
-                raise LayerstackError(
-                    f"{self.name}: wavelengths {w.min():g}–{w.max():g} nm outside the data range "
-                    f"{table[0]:g}–{table[-1]:g} nm"
-                )
-        x = jnp.asarray(wavelength_nm)
-        if not is_concrete(wavelength_nm):
-            # traced grid: the check runs inside the compiled function
-            x = eqx.error_if(
-                x,
-                (x < table[0] - 1e-9) | (x > table[-1] + 1e-9),
-                f"{self.name}: wavelengths outside the data range {table[0]:g}–{table[-1]:g} nm",
-            )
+        x = check_wavelength_range(self.name, wavelength_nm, float(table[0]), float(table[-1]))
         n = jnp.interp(x, table, jnp.asarray(self.n))
         k = 0.0 if self.k is None else jnp.interp(x, table, jnp.asarray(self.k))
         return _complex(n, k)

@@ -36,6 +36,7 @@ __all__ = [
     "check_positive",
     "check_unit_interval",
     "check_angle_deg",
+    "check_wavelength_range",
     "warn_if_implausible",
 ]
 
@@ -131,6 +132,24 @@ def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingCh
         pending.add(key, xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
         return xj
     return eqx.error_if(xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
+
+
+def check_wavelength_range(name: str, x, lo: float, hi: float):
+    """Wavelengths ``x`` (nm) inside a material table's range ``[lo, hi]`` (tolerance 1e-9 nm):
+    ``x`` as a JAX array; a :class:`LayerstackError` naming the material (``name``), the range
+    asked for and the data range — at once on concrete wavelengths, at run time
+    (``equinox.error_if``) on traced ones, not at all inside :func:`traced_checks_off` (the fitting
+    objective checks its grid against every table when it is built)."""
+    if is_concrete(x):
+        w = np.asarray(x)
+        if np.any(w < lo - 1e-9) or np.any(w > hi + 1e-9):
+            raise LayerstackError(f"{name}: wavelengths {w.min():g}–{w.max():g} nm outside the data range "
+                                  f"{lo:g}–{hi:g} nm")
+        return jnp.asarray(x)
+    x = jnp.asarray(x)
+    if not _TRACED_CHECKS.get():
+        return x
+    return eqx.error_if(x, (x < lo - 1e-9) | (x > hi + 1e-9), f"{name}: wavelengths outside the data range {lo:g}–{hi:g} nm")
 
 
 def check_finite(name: str, x, **pending):

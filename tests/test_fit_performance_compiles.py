@@ -151,3 +151,30 @@ def test_shared_ellipsometer_reading_only_where_it_is_ellipsometry():
             np.testing.assert_allclose(np.asarray(m)[0], y, rtol=1e-12, atol=1e-12, err_msg=f"{g.label} {mode}")
         shared = [g.ellipsometry_angle(stack) for g in gs]
         assert (all(a is not None for a in shared)) == (stack is film and mode == "reflection")
+
+
+def test_compiled_fit_of_table_materials_holds_no_host_callback():
+    """The range checks of database and tabulated materials are off inside the solver (the
+    objective checked its grid against every table when it was built): the compiled fit holds
+    no host callback, so JAX can keep it in its persistent compilation cache (a program with a
+    callback is never written there) — and it has two runtime branches less to compile."""
+    wl = np.linspace(400.0, 800.0, 9)
+    ink = ls.Tabulated([300.0, 900.0], [1.55, 1.50], name="ink")
+
+    def stack(d):
+        return ls.Stack(1.0, [ls.Layer(ink, d, name="film"), ls.Layer(ls.material("SiO2", "Malitson"), 2.0)],
+                        ls.Substrate(ls.material("Si", "Aspnes")))
+
+    e = ls.ellipsometry(stack(120.0), wl, np.asarray([60.0]))
+    obj = ft.Objective(stack(100.0), wl, [ft.Dataset(ls.Ellipsometric(60.0, "psi"), np.asarray(e.psi_deg)[0], sigma=0.01)],
+                       [ft.thickness("film", lower=20.0, upper=300.0)])
+    o = _solve.SolverOptions()
+    fn = _solve.compiled_fit(obj, o, batched=False)
+    y0 = _solve.starting_point(obj, o, obj.layout.x0)
+    jaxpr = str(jax.make_jaxpr(fn.jitted)(y0, obj.args(), obj.optics, _solve.NEVER))
+    assert "callback" not in jaxpr
+    assert float(np.squeeze(ft.fit(obj).values["thickness[film]"])) == pytest.approx(120.0, rel=1e-8)
+    # outside the solver the same materials are still checked under jit
+    f = jax.jit(lambda w: ls.ellipsometry(stack(100.0), w, np.asarray([60.0])).psi_deg)
+    with pytest.raises(Exception, match="outside the data range"):
+        jax.block_until_ready(f(jnp.asarray([150.0, 500.0])))

@@ -84,10 +84,11 @@ def divide(num: ComplexLike, den: ComplexLike) -> Complex[Array, "..."]:
     gives exactly 1 (an interface at its critical angle: R = 1 exactly). |w|² must not
     overflow: fine for the amplitude denominators here (|w| ≲ 1e3; the limit is 1e154 in
     float64, 1e19 in float32)."""
+    num = jnp.asarray(num)
+    a, b = jnp.real(num), jnp.imag(num)
     x, y = jnp.real(den), jnp.imag(den)
-    w = num * lax.complex(x, -y)
-    size = x * x + y * y
-    return lax.complex(jnp.real(w) / size, jnp.imag(w) / size)
+    # Re(z w̄) and |w|² written alike, so that they round alike when z = w
+    return lax.complex((a * x + b * y) / (x * x + y * y), (b * x - a * y) / (x * x + y * y))
 
 
 def _by_polarization(s_value, p_value):

@@ -11,7 +11,9 @@ format is described in :mod:`layerstack_jax.io`.
 
 Unlike the library, the command line enables float64 (``jax_enable_x64``) unless ``--float32``
 is given, and restores the previous setting when it returns (so ``main`` can be called
-in-process). ``fit`` and ``fit-cube`` exit with status 1 when a fit (a fitted pixel) did not
+in-process). It also keeps the programs it compiles on disk (JAX's persistent compilation
+cache, in ``$LAYERSTACK_CACHE_DIR`` or ``~/.cache/layerstack/xla``; ``LAYERSTACK_CACHE_DIR=`` turns
+it off), so a later run of the same model structure does not compile them again. ``fit`` and ``fit-cube`` exit with status 1 when a fit (a fitted pixel) did not
 converge (the report says why);
 ``design`` exits with status 1 when the design misses a target (or the required yield) — it
 still writes the best design found, and the report says which target failed; a design that

@@ -21,6 +21,9 @@ import sys
 import jax
 
 jax.config.update("jax_enable_x64", True)
+# the command line's persistent compilation cache stays off in the suite (in-process CLI calls
+# would write to ~/.cache); tests/test_fitting_cli.py turns it on in a directory of its own
+os.environ.setdefault("LAYERSTACK_CACHE_DIR", "")
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 
 _HERE = os.path.dirname(os.path.abspath(__file__))

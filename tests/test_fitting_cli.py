@@ -161,3 +161,36 @@ def test_cli_joint_fit_with_bare_background(tmp_path, capsys):
     assert "--background needs --joint" in capsys.readouterr().err
     assert main(["fit", str(stack), str(data), "-g", "45/0", "--joint", "--background", "nope", "-o", str(out)]) == 2
     assert "no column 'nope'" in capsys.readouterr().err
+
+
+def test_cli_keeps_compiled_programs_on_disk(tmp_path):
+    """`layerstack fit` in a fresh process writes its compiled programs to the persistent cache
+    ($LAYERSTACK_CACHE_DIR); a second run of the same model structure loads them (no new entry)
+    and gives the same result; LAYERSTACK_CACHE_DIR= (empty) writes nothing."""
+    import os
+    import subprocess
+    import sys
+
+    stack = tmp_path / "s.toml"
+    stack.write_text(STACK.format(alpha="2e-5"))
+    data = tmp_path / "d.csv"
+    save_spectra_csv(data, WL, {"a": _truth(10_000.0, 2e-5)})
+    cache = tmp_path / "cache"
+
+    def run(out, cache_dir):
+        env = dict(os.environ, LAYERSTACK_CACHE_DIR=cache_dir, JAX_PLATFORMS="cpu",
+                   JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")  # this small model compiles fast
+        proc = subprocess.run([sys.executable, "-m", "layerstack_cli", "fit", str(stack), str(data), "-g",
+                               "specular:0:T", "-o", str(out)], env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(out.read_text())["fits"][0]["parameters"]
+
+    first = run(tmp_path / "1.json", str(cache))
+    entries = {p.name for p in cache.iterdir() if p.name.startswith("jit_")} if cache.exists() else {"no cache dir"}
+    assert any(e.startswith("jit_run") for e in entries), entries  # the compiled fit itself
+    second = run(tmp_path / "2.json", str(cache))
+    assert {p.name for p in cache.iterdir() if p.name.startswith("jit_")} == entries
+    assert second == first
+    off = tmp_path / "off"
+    run(tmp_path / "3.json", "")
+    assert not off.exists()

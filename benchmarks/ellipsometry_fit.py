@@ -17,7 +17,7 @@ the same wavelengths, exact at the nodes) — not by the code under test — plu
 Timed, in each fresh process (``--processes`` of them; the figures are the best process):
 
 * **layerstack** (``fitting.Objective`` with six ``Ellipsometric`` datasets, σ given;
-  ``fitting.fit``, Levenberg–Marquardt, ``rtol=1e-8, atol=1e-10``: :data:`FIT_OPTIONS`):
+  ``fitting.fit``, Levenberg–Marquardt with the library's stopping rules, :data:`FIT_OPTIONS`):
   building the objective; the first ``fit`` (trace, compile, solve, statistics, report
   ingredients); each further fit of the same objective on new
   data (``fit(objective, data=...)``: the compiled solver is reused) — min and median over
@@ -45,6 +45,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -57,10 +58,12 @@ START = {"d": 100.0, "A": 1.50, "B": 0.0050}
 BOUNDS = {"d": (20.0, 300.0), "A": (None, None), "B": (None, None)}  # A, B: no bounds (module docstring)
 OXIDE_NM = 2.0
 SIGMA_DEG = 0.02
-#: stopping rule of layerstack's fits: rtol 1e-8 (MINPACK's, hence lmfit's, default is 1.5e-8) — with the
-#: library's defaults (rtol 1e-10, atol 1e-12), 5 of 6 fits of this problem ran to max_steps = 256 at the
-#: optimum (benchmarks/README.md)
-FIT_OPTIONS = {"rtol": 1e-8, "atol": 1e-10}
+#: stopping rules of layerstack's fits: the library's defaults (a solve ends within 1e-3 standard errors
+#: of its minimum, ``sigma_tol``). Before that rule, the defaults' step test (rtol 1e-10) ran 5 of 6
+#: fits of this problem to max_steps = 256 at the optimum and this benchmark used rtol 1e-8.
+FIT_OPTIONS: dict = {}
+#: layerstack vs pyElli, in standard errors: each solve stops within 1e-3 of its own minimum
+AGREEMENT_STDERR = 2e-3
 TARGETS = {"compile_s": 3.0, "further_fit_s": 0.050, "multistart16_s": 5.0}
 #: the timings of a process; the report gives each one's best over the processes
 TIMED = ("objective_s", "first_fit_s", "compile_s", "further_fit_min_s", "further_fit_median_s", "multistart_first_s",
@@ -174,6 +177,8 @@ def run(n_wavelengths: int = 700, repeats: int = 10, starts: int = 16, seed: int
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    if os.environ.get("E1_COMPILATION_CACHE"):  # the warm-cache processes (main)
+        jax.config.update("jax_compilation_cache_dir", os.environ["E1_COMPILATION_CACHE"])
     if not _WATCH.get("registered"):  # once per process
         jax.monitoring.register_event_duration_secs_listener(_listen)
         _WATCH["registered"] = True
@@ -301,6 +306,10 @@ def markdown(best: dict, runs: list, machine: dict, uptime: str) -> list[str]:
         f"{best['first_fit_cpu_s']:.2f} s | {each('first_fit_s')} s | — | — |",
         f"| compile (first fit − median further fit) | {best['compile_s']:.2f} s | {best['compile_cpu_s']:.2f} s | "
         f"{each('compile_s')} s | ≤ {t['compile_s']:g} s | {ok(best['compile_s'], t['compile_s'])} |",
+        *([f"| first `fit` in a fresh process, JAX's persistent compilation cache warm (as `layerstack fit` from "
+           f"its second run on; the process that filled it: {best['warm_cache']['filling_first_fit_s']:.2f} s) | "
+           f"{best['warm_cache']['first_fit_s']:.2f} s | {best['warm_cache']['first_fit_cpu_s']:.2f} s | | — | — |"]
+          if "warm_cache" in best else []),
         f"| further fit, same objective, new data (min / median) | {1e3 * best['further_fit_min_s']:.1f} / "
         f"{1e3 * best['further_fit_median_s']:.1f} ms | {1e3 * best['further_fit_median_cpu_s']:.1f} ms (median) | "
         f"{each('further_fit_median_s', 1e3, 0)} ms (medians) | ≤ {1e3 * t['further_fit_s']:g} ms | "
@@ -324,7 +333,7 @@ def markdown(best: dict, runs: list, machine: dict, uptime: str) -> list[str]:
         f"- layerstack ψ, Δ at the truth vs pyElli's: max |difference| "
         f"{max(r['model_check_deg'] for r in runs):.1e}° (≤ 1e-9° required).",
         f"- fitted values, layerstack vs pyElli: max |difference| "
-        f"{max(r['max_disagreement_in_stderr'] for r in runs):.1e} standard errors (≤ 1e-3 required). "
+        f"{max(r['max_disagreement_in_stderr'] for r in runs):.1e} standard errors (≤ {AGREEMENT_STDERR:g} required). "
         f"First data set: d = {d_ours[0]:.5f} / {d_elli[0]:.5f} nm, A = {d_ours[1]:.6f} / {d_elli[1]:.6f}, "
         f"B = {d_ours[2]:.7f} / {d_elli[2]:.7f} µm² (layerstack / pyElli; standard errors {se[0]:.2g} nm, "
         f"{se[1]:.2g}, {se[2]:.2g} µm²).",
@@ -449,6 +458,21 @@ def main(argv=None) -> int:
     best = dict(runs[0])  # every timing: the best (lowest) over the processes
     for key in TIMED:
         best[key] = min(r[key] for r in runs)
+    # JAX's persistent compilation cache (what `layerstack fit` uses from its second run on): one
+    # process fills a fresh cache, the next one's first fit loads the compiled program from it
+    with tempfile.TemporaryDirectory() as cache:
+        warm = []
+        for _ in range(2):
+            cmd = [sys.executable, "-m", "benchmarks.ellipsometry_fit", "--child", "--repeats", "1",
+                   "--wavelengths", str(a.wavelengths), "--starts", "1"]
+            out = subprocess.run(cmd, cwd=root, capture_output=True, text=True,
+                                 env=dict(os.environ, E1_COMPILATION_CACHE=cache))
+            if out.returncode != 0:
+                print(out.stderr[-4000:], file=sys.stderr)
+                return 1
+            warm.append(json.loads(next(s for s in out.stdout.splitlines() if s.startswith("RESULT "))[len("RESULT "):]))
+    best["warm_cache"] = {"first_fit_s": warm[1]["first_fit_s"], "first_fit_cpu_s": warm[1]["first_fit_cpu_s"],
+                          "compiles": warm[1]["compiles"]["first_fit"], "filling_first_fit_s": warm[0]["first_fit_s"]}
     lines = markdown(best, runs, machine, uptime)
     out_dir = Path(a.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

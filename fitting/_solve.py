@@ -184,71 +184,56 @@ def near_minimum(state, sigma_tol: float, dof: int):
     return (state.num_accepted_steps >= 1) & (d2 <= sigma_tol ** 2 * jnp.minimum(1.0, s2))
 
 
-def _stop_near_minimum(solver, state, done, result):
-    """``(done, result)`` of a solve, also done — successfully — when :func:`near_minimum`."""
-    if not solver.sigma_tol:
-        return done, result
-    near = jnp.invert(done) & near_minimum(state, solver.sigma_tol, solver.dof)
-    return done | near, optx.RESULTS.where(near, optx.RESULTS.successful, result)
-
-
-class GaussNewton(optx.AbstractGaussNewton):
-    """:class:`optimistix.GaussNewton` (the same parts: undamped Newton steps, unit learning
-    rate) that also stops near the minimum (:func:`near_minimum`)."""
+class _GaussNewtonFamily(optx.AbstractGaussNewton):
+    """The Gauss–Newton-family solvers of :func:`fit`: optimistix's composition (a descent
+    within a search, :class:`optimistix.AbstractGaussNewton`) whose solves also stop near the
+    minimum (:func:`near_minimum`, ``sigma_tol`` standard errors; 0: never) — ``dof`` the
+    fit's degrees of freedom."""
 
     rtol: float
     atol: float
     sigma_tol: float = 0.0
     dof: int = 1
     norm: Callable = optx.max_norm
+    verbose: Callable = _quiet
+
+    def terminate(self, fn, y, args, options, state, tags):
+        done, result = super().terminate(fn, y, args, options, state, tags)
+        if not self.sigma_tol:
+            return done, result
+        near = jnp.invert(done) & near_minimum(state, self.sigma_tol, self.dof)
+        return done | near, optx.RESULTS.where(near, optx.RESULTS.successful, result)
+
+
+class GaussNewton(_GaussNewtonFamily):
+    """:class:`optimistix.GaussNewton`'s parts (undamped Newton steps, unit learning rate)."""
+
     descent: optx.AbstractDescent = optx.NewtonDescent()
     search: optx.AbstractSearch = optx.LearningRate(1.0)
-    verbose: Callable = _quiet
-
-    def terminate(self, fn, y, args, options, state, tags):
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        return _stop_near_minimum(self, state, done, result)
 
 
-class Dogleg(optx.AbstractGaussNewton):
-    """:class:`optimistix.Dogleg` (the same parts) that also stops near the minimum
-    (:func:`near_minimum`)."""
+class Dogleg(_GaussNewtonFamily):
+    """:class:`optimistix.Dogleg`'s parts (dogleg steps in a classical trust region)."""
 
-    rtol: float
-    atol: float
-    sigma_tol: float = 0.0
-    dof: int = 1
-    norm: Callable = optx.max_norm
     descent: optx.AbstractDescent = optx.DoglegDescent()
     search: optx.AbstractSearch = optx.ClassicalTrustRegion()
-    verbose: Callable = _quiet
-
-    def terminate(self, fn, y, args, options, state, tags):
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        return _stop_near_minimum(self, state, done, result)
 
 
-class LevenbergMarquardt(optx.AbstractGaussNewton):
+class LevenbergMarquardt(_GaussNewtonFamily):
     """Levenberg–Marquardt composed from optimistix parts, as optimistix documents for custom
     solvers: Gauss–Newton steps damped by :class:`optimistix.DampedNewtonDescent` (QR of the
     damped system) within the :class:`RoundoffTrustRegion` update."""
 
-    rtol: float
-    atol: float
-    sigma_tol: float = 0.0
-    dof: int = 1
-    norm: Callable = optx.max_norm
     descent: optx.AbstractDescent = optx.DampedNewtonDescent(linear_solver=lx.QR())
     search: optx.AbstractSearch = RoundoffTrustRegion()
-    verbose: Callable = _quiet
 
     def terminate(self, fn, y, args, options, state, tags):
-        """optimistix's test, and the multi-start give-up rule: with ``options["give_up"] =
+        r"""The family's test, and the multi-start give-up rule: with ``options["give_up"] =
         (steps, cost)``, a solve that has taken ``steps`` steps while its cost
         :math:`\tfrac12\|r\|^2` is still above ``cost`` ends, marked
         ``RESULTS.nonlinear_divergence`` (:data:`fitting._status.ABANDONED`; a result the
         Gauss–Newton family never gives otherwise). A single fit passes :data:`NEVER`."""
-        done, result = _stop_near_minimum(self, state, *super().terminate(fn, y, args, options, state, tags))
+        done, result = super().terminate(fn, y, args, options, state, tags)
         give_up = (options or {}).get("give_up")
         if give_up is None:
             return done, result

@@ -85,3 +85,26 @@ def max_abs(a, b) -> float:
 # angles in radians (ls.specular takes degrees; angle_rad= says radians)
 specular_jit = jax.jit(lambda st, wl, angle_rad, both_sides=True: ls.specular(st, wl, angle_rad=angle_rad, both_sides=both_sides),
                        static_argnames=("both_sides",))
+
+
+# --------------------------------------------------------------------------- XLA compilations
+_COMPILES = {"on": False, "n": 0}
+
+
+def _count_compiles(event, duration, **kw):
+    if _COMPILES["on"] and event == "/jax/core/compile/backend_compile_duration":
+        _COMPILES["n"] += 1
+
+
+jax.monitoring.register_event_duration_secs_listener(_count_compiles)
+
+
+def compiles(f, *args, **kwargs):
+    """``(f(...), number of XLA compilations it made)`` (JAX's compile events: a public API,
+    unlike a jitted function's ``_cache_size``, whose C++ fast-path cache may stay empty)."""
+    _COMPILES.update(on=True, n=0)
+    try:
+        out = f(*args, **kwargs)
+    finally:
+        _COMPILES["on"] = False
+    return out, _COMPILES["n"]

@@ -22,31 +22,13 @@ import fitting as ft
 import layerstack_jax as ls
 from fitting import _solve
 from fitting._status import ABANDONED, STATUS
+from _helpers import compiles
 
 WL = np.linspace(400.0, 800.0, 60)
 ANGLES = (60.0, 70.0)
 TRUTH = (120.0, 1.55, 0.008)  # film thickness nm, Cauchy A, B (µm²)
 SIGMA = 0.02
 
-_COMPILES = {"on": False, "n": 0}
-
-
-def _count(event, duration, **kw):
-    if _COMPILES["on"] and event == "/jax/core/compile/backend_compile_duration":
-        _COMPILES["n"] += 1
-
-
-jax.monitoring.register_event_duration_secs_listener(_count)
-
-
-def compiles(f, *args, **kwargs):
-    """``(f(...), number of XLA compilations it made)``."""
-    _COMPILES.update(on=True, n=0)
-    try:
-        out = f(*args, **kwargs)
-    finally:
-        _COMPILES["on"] = False
-    return out, _COMPILES["n"]
 
 
 def _stack(d, A, B):

@@ -68,16 +68,17 @@ _DTYPE_BYTES = {"pred": 1, "s8": 1, "u8": 1, "bf16": 2, "f16": 2, "s16": 2, "u16
 _NOT_KERNELS = {"parameter", "constant", "get-tuple-element", "tuple", "bitcast", "while", "opt-barrier", "after-all"}
 
 
-def _best(fn, *args, repeats: int = 7) -> float:
-    """Best wall time (s) of ``fn(*args)`` (already compiled: one warm-up call first)."""
+def _best(fn, *args, repeats: int = 7, clock=time.perf_counter) -> float:
+    """Least time (s) of ``fn(*args)`` by ``clock`` — wall time by default — over ``repeats``
+    calls (already compiled: one warm-up call first)."""
     import jax
 
     jax.block_until_ready(fn(*args))
     best = np.inf
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = clock()
         jax.block_until_ready(fn(*args))
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, clock() - t0)
     return float(best)
 
 
@@ -142,15 +143,7 @@ def hlo_traffic(hlo_text: str) -> float:
 def _best_cpu(fn, *args, repeats: int = 7) -> float:
     """Least process CPU time (s, all threads) of ``fn(*args)``: less sensitive than wall time to
     other processes on the machine."""
-    import jax
-
-    jax.block_until_ready(fn(*args))
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.process_time()
-        jax.block_until_ready(fn(*args))
-        best = min(best, time.process_time() - t0)
-    return float(best)
+    return _best(fn, *args, repeats=repeats, clock=time.process_time)
 
 
 def ops_per_point(films: int) -> dict:

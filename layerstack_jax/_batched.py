@@ -39,6 +39,16 @@ returns a lazy Dask array, one task per block of the batch, computed on whatever
 active (threads, processes, a ``distributed.Client``): each worker process compiles once per
 structure (the cache above) and runs this same chunked loop on its block.
 
+``chunk="auto"`` (the default) sizes the vmapped block from the memory available where the
+work runs (:func:`memory_budget`: a Dask worker's memory limit inside a worker, else this
+process's available memory, and an accelerator's free memory): the program compiled for
+``min(AUTO_CHUNK_MAX, N)`` spectra per block is measured (``compiled.memory_analysis()``:
+temp + argument + output bytes), and used as it is if it fits the budget; otherwise the block
+shrinks to ``⌊(budget − argument − output) / (temp / chunk)⌋`` spectra (the working memory per
+spectrum measured on that program) and a budget that cannot hold one spectrum is a
+:class:`LayerstackError` naming ``chunk``. The sizes chosen and the budget are logged
+(``layerstack_jax.batched`` logger) and remembered per compiled program.
+
 Leaves are checked by the stack's own constructors: a Dask leaf is read once there (its
 non-negativity check), so very large batches should come as NumPy arrays (or memmaps).
 """
@@ -49,6 +59,8 @@ import collections
 import hashlib
 import logging
 import math
+import os
+import sys
 import time
 from typing import Callable, NamedTuple, Optional, Union
 
@@ -62,10 +74,19 @@ from ._progress import reporter
 from ._stack import LambertianBackground, Layer, Stack
 from ._validate import LayerstackError, is_concrete
 
-__all__ = ["predict", "batch_layout", "BatchLayout", "DEFAULT_CHUNK", "DEFAULT_STEP"]
+__all__ = ["predict", "batch_layout", "BatchLayout", "DEFAULT_CHUNK", "DEFAULT_STEP", "AUTO_CHUNK_MAX",
+           "MEMORY_FRACTION", "MemoryBudget", "memory_budget"]
 
-#: Spectra per vmapped block inside ``lax.map`` (bounds the intermediates: ~1.7 MB per P2 spectrum).
+#: Spectra per vmapped block inside ``lax.map`` (bounds the intermediates: ~1.7 MB per P2 spectrum)
+#: where ``chunk="auto"`` cannot measure (inside a JAX transformation, or no memory analysis).
 DEFAULT_CHUNK = 4
+#: Largest ``chunk="auto"`` block, by platform: on CPU blocks larger than ~10 spectra only slow
+#: down (benchmarks/README.md: 1388 → 602 spectra/s from chunk 10 to 1000); accelerators gain
+#: from wide blocks.
+AUTO_CHUNK_MAX = {"cpu": 8, "default": 1024}
+#: Fraction of the memory available where the work runs that ``"auto"`` sizes may fill (the rest:
+#: the process itself, and room below Dask's spill (60-70 %) and pause (80 %) thresholds).
+MEMORY_FRACTION = 0.5
 #: Spectra per compiled call (one progress update; the host copies this many spectra at a time).
 DEFAULT_STEP = 2048
 
@@ -91,6 +112,110 @@ class BatchLayout(NamedTuple):
     batched: tuple
     cores: tuple
     names: tuple
+
+
+class MemoryBudget(NamedTuple):
+    """Memory that ``"auto"`` sizes may fill (:func:`memory_budget`): ``bytes`` (the budget),
+    ``available`` (what it is a ``fraction`` of) and ``source`` (where ``available`` comes from)."""
+
+    bytes: int
+    available: int
+    fraction: float
+    source: str
+
+    def describe(self) -> str:
+        if self.fraction == 1:
+            return f"{self.bytes / 1e6:.4g} MB ({self.source})"
+        return (f"{self.bytes / 1e6:.4g} MB ({self.fraction:g} of {self.available / 1e6:.4g} MB, "
+                f"{self.source})")
+
+
+def _read_int(path: str) -> Optional[int]:
+    try:
+        with open(path) as f:
+            text = f.read().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None  # "max" (cgroup v2: no limit) -> None
+
+
+def _host_available() -> tuple[int, str]:
+    """``(bytes, source)`` of the memory this process may still take: the system's available
+    memory (``MemAvailable`` of /proc/meminfo, else ``os.sysconf`` free pages), lowered to the
+    room left under a cgroup memory limit (v2 ``memory.max - memory.current``, v1
+    ``memory.limit_in_bytes - memory.usage_in_bytes``) when there is one."""
+    available, source = None, "available system memory"
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    available = int(line.split()[1]) * 1024
+                    break
+    except OSError:
+        pass
+    if available is None:
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+            source = "free system memory (sysconf)"
+        except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+            available, source = 4 << 30, "unknown system memory: assumed 4 GiB"
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        limit = _read_int(limit_file)
+        if limit is not None and limit < 1 << 60:  # v1 writes "no limit" as a huge number
+            room = max(limit - (_read_int(usage_file) or 0), 0)
+            if room < available:
+                available, source = room, f"room under the cgroup memory limit {limit / 1e6:.4g} MB"
+            break
+    return int(available), source
+
+
+def _worker_limit() -> Optional[tuple[int, str]]:
+    """``(bytes, source)``: the memory limit of the Dask worker running this task, shared by its
+    threads, or None outside a worker (or a worker without a limit)."""
+    if "distributed" not in sys.modules:  # a worker process has imported it
+        return None
+    from distributed import get_worker
+
+    try:
+        worker = get_worker()
+    except ValueError:  # not in a worker
+        return None
+    limit = worker.memory_manager.memory_limit
+    if not limit:
+        return None
+    threads = max(int(getattr(worker, "nthreads", 1) or 1), 1)
+    return int(limit) // threads, (f"Dask worker {worker.address} memory_limit {limit / 1e6:.4g} MB"
+                                   + (f" / {threads} threads" if threads > 1 else ""))
+
+
+def memory_budget(fraction: float = MEMORY_FRACTION, *, device: bool = False) -> MemoryBudget:
+    """The memory ``"auto"`` sizes may fill where this code runs: ``fraction`` of
+
+    * inside a Dask worker: that worker's memory limit
+      (``distributed.get_worker().memory_manager.memory_limit``) divided by its threads (tasks
+      running at once share it);
+    * otherwise: this process's available memory (:func:`_host_available`: the system's
+      available memory, or the room under a cgroup limit if smaller);
+    * with ``device`` and an accelerator (``jax.local_devices()[0].memory_stats()`` reports a
+      ``bytes_limit``): the smaller of that and the accelerator's free memory.
+    """
+    if not 0 < fraction <= 1:
+        raise LayerstackError(f"memory_budget: fraction must be in (0, 1], got {fraction!r}")
+    found = _worker_limit()
+    available, source = found if found is not None else _host_available()
+    if device:
+        stats = None
+        try:
+            stats = jax.local_devices()[0].memory_stats()
+        except Exception:  # backends without memory statistics  # pragma: no cover
+            stats = None
+        if stats and stats.get("bytes_limit"):
+            free = int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
+            if free < available:
+                available, source = free, f"free memory of {jax.local_devices()[0].device_kind}"
+    return MemoryBudget(int(available * fraction), int(available), float(fraction), source)
 
 
 def _field_names(stack: Stack):
@@ -231,6 +356,8 @@ def _digest(tree) -> str:
 
 _COMPILED: "collections.OrderedDict[tuple, Callable]" = collections.OrderedDict()
 _MAX_COMPILED = 8
+#: ``(compiled-program key, step) -> (temp, argument, output bytes)`` measured by ``chunk="auto"``
+_MEASURED: "collections.OrderedDict[tuple, tuple]" = collections.OrderedDict()
 
 
 def _spectrum_function(treedef, shared: list, batched: tuple, wl, geometry: Geometry, nodes: int, optics):
@@ -246,9 +373,10 @@ def _spectrum_function(treedef, shared: list, batched: tuple, wl, geometry: Geom
 
 
 def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int, use_optics: bool,
-              template_rows: tuple):
+              template_rows: tuple, with_key: bool = False):
     """The jitted ``rows (step, *core) -> spectra (step, *angle, wl)`` for this structure and
-    these shared values; cached (``_MAX_COMPILED`` entries, least recently used dropped)."""
+    these shared values; cached (``_MAX_COMPILED`` entries, least recently used dropped).
+    ``with_key``: ``(function, cache key)``."""
     leaves, treedef = jax.tree_util.tree_flatten(stack)
     shared = [None if b else leaf for leaf, b in zip(leaves, lay.batched)]
     key = (treedef, lay.batched, tuple((r.shape[1:], r.dtype.str) for r in template_rows),
@@ -256,7 +384,7 @@ def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int
     fn = _COMPILED.get(key)
     if fn is not None:
         _COMPILED.move_to_end(key)
-        return fn
+        return (fn, key) if with_key else fn
     optics = None
     if use_optics:
         first = iter(r[0] for r in template_rows)
@@ -267,7 +395,75 @@ def _compiled(stack: Stack, lay: BatchLayout, wl, geometry: Geometry, nodes: int
     _COMPILED[key] = fn
     while len(_COMPILED) > _MAX_COMPILED:
         _COMPILED.popitem(last=False)
-    return fn
+    return (fn, key) if with_key else fn
+
+
+def _auto_chunk_max() -> int:
+    """The largest ``chunk="auto"`` block on the default backend (:data:`AUTO_CHUNK_MAX`)."""
+    return AUTO_CHUNK_MAX.get(jax.default_backend(), AUTO_CHUNK_MAX["default"])
+
+
+def _memory_of(fn: Callable, key: tuple, rows: tuple, step: int) -> Optional[tuple]:
+    """``(temp, argument, output)`` bytes of ``fn`` compiled for ``step`` rows shaped like
+    ``rows`` (``compiled.memory_analysis()``; the compilation is jit's own, reused by the call
+    that follows); None where the backend gives no analysis. Remembered per program and step."""
+    mkey = (key, step)
+    if mkey in _MEASURED:
+        _MEASURED.move_to_end(mkey)
+        return _MEASURED[mkey]
+    shapes = tuple(jax.ShapeDtypeStruct((step,) + r.shape[1:], r.dtype) for r in rows)
+    try:
+        m = fn.lower(shapes).compile().memory_analysis()
+    except Exception as e:  # a backend without memory analysis  # pragma: no cover
+        log.debug("predict: no memory analysis (%s)", e)
+        return None
+    if m is None:  # pragma: no cover
+        return None
+    found = (int(m.temp_size_in_bytes), int(m.argument_size_in_bytes), int(m.output_size_in_bytes))
+    _MEASURED[mkey] = found
+    while len(_MEASURED) > 4 * _MAX_COMPILED:
+        _MEASURED.popitem(last=False)
+    return found
+
+
+def _step_for(step: int, chunk: int, n: int) -> int:
+    """``step`` rounded up to a multiple of ``chunk`` × local devices, at most N rounded up so."""
+    per_call = chunk * len(jax.local_devices())  # one chunk per device at least: equal device shares
+    return int(-(-min(max(int(step), per_call), n) // per_call) * per_call)
+
+
+def _resolve_auto_chunk(build: Callable, rows: tuple, step: int, n: int, memory: Optional[int]):
+    """``(chunk, step, fn)`` for ``chunk="auto"``: the program for ``c = min(AUTO_CHUNK_MAX, N)``
+    spectra per block is compiled and measured (temp ``T``, arguments ``A``, outputs ``O``
+    bytes of one call of ``step`` spectra); if ``T + A + O`` fits the budget it is used, else
+    the block shrinks to ``⌊(budget − A − O) / (T / c)⌋`` spectra (``T / c``: the working
+    memory per spectrum measured), at least 1 (else a LayerstackError naming ``chunk``)."""
+    budget = (MemoryBudget(int(memory), int(memory), 1.0, "given (memory=)") if memory is not None
+              else memory_budget(device=True))
+    chunk = min(_auto_chunk_max(), n)
+    fn, key = build(chunk)
+    call = _step_for(step, chunk, n)
+    found = _memory_of(fn, key, rows, call)
+    if found is None:  # pragma: no cover - no analysis: the fixed default
+        chunk = min(DEFAULT_CHUNK, n)
+        log.info("predict: chunk auto -> %d (the default: no memory analysis on %s)", chunk, jax.default_backend())
+        return chunk, _step_for(step, chunk, n), build(chunk)[0]
+    temp, args, outs = found
+    per_spectrum = temp / chunk
+    if temp + args + outs > budget.bytes:
+        fits = int((budget.bytes - args - outs) // per_spectrum) if per_spectrum > 0 else chunk
+        if fits < 1:
+            raise LayerstackError(
+                f"predict: chunk: the memory budget {budget.describe()} cannot hold one block of 1 spectrum: "
+                f"{per_spectrum / 1e6:.4g} MB of working memory per spectrum plus {(args + outs) / 1e6:.4g} MB for "
+                f"the {call} spectra of one call in and out (lower step=, or give the process more memory)")
+        chunk = fits
+        fn, key = build(chunk)
+        call = _step_for(step, chunk, n)
+    log.info("predict: chunk auto -> %d spectra per block, step %d (measured %.4g MB working memory per spectrum, "
+             "%.4g MB per call of %d spectra in and out); budget %s", chunk, call, per_spectrum / 1e6,
+             (args + outs) / 1e6, call, budget.describe())
+    return chunk, call, fn
 
 
 def _over_devices(blocks: Callable) -> Callable:
@@ -296,9 +492,9 @@ def _rows(leaf, batch: tuple, core: tuple, flat_index: np.ndarray):
     return np.ascontiguousarray(view[np.unravel_index(flat_index, batch)])
 
 
-def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None, chunk: int = DEFAULT_CHUNK,
+def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None, chunk: Union[int, str] = "auto",
             step: int = DEFAULT_STEP, progress: Union[None, bool, Callable[[int, int], None]] = None,
-            nodes: int = DEFAULT_NODES, out: Optional[np.ndarray] = None):
+            nodes: int = DEFAULT_NODES, out: Optional[np.ndarray] = None, memory: Optional[int] = None):
     r"""What :func:`~layerstack_jax.reflectance` reads for every stack of a batch (module docstring).
 
     Args:
@@ -310,7 +506,9 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
             ``(*angle)`` axes after the batch axes).
         batch_shape: the batch axes, or None to infer them from the leaves.
         chunk: spectra per vmapped block (memory: about 1.7 MB per spectrum for a 401-λ sphere
-            prediction over a background).
+            prediction over a background), or ``"auto"`` (default): sized from the memory
+            available where the work runs (module docstring; :func:`memory_budget`), at most
+            :data:`AUTO_CHUNK_MAX` (8 on CPU); :data:`DEFAULT_CHUNK` inside a transformation.
         step: spectra per compiled call (rounded up to a multiple of ``chunk`` times the
             number of local devices): the host copies and the progress bar advances once per
             call. With several devices each call is split over all of them (module docstring).
@@ -319,6 +517,8 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
         nodes: Gauss–Legendre nodes per critical-angle segment of the diffuse integrals.
         out: optional preallocated float array ``(*batch, *angle, wl)`` (e.g. a
             ``numpy.memmap``) to write into; returned.
+        memory: bytes ``chunk="auto"`` may fill (default: :func:`memory_budget` where the
+            work runs, e.g. each Dask worker's own).
 
     Returns:
         ``(*batch, *angle, wl)``, in the unit the geometry reads (a dimensionless reflectance
@@ -333,8 +533,13 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
     if not isinstance(geometry, Geometry):
         raise LayerstackError(f"predict: geometry must be a layerstack_jax Geometry, got {geometry!r}")
     for what, v in (("chunk", chunk), ("step", step)):
+        if what == "chunk" and isinstance(v, str) and v == "auto":
+            continue
         if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1):
-            raise LayerstackError(f"predict: {what} must be an integer >= 1, got {v!r}")
+            allowed = "an integer >= 1 or 'auto'" if what == "chunk" else "an integer >= 1"
+            raise LayerstackError(f"predict: {what} must be {allowed}, got {v!r}")
+    if memory is not None and not (isinstance(memory, (int, np.integer)) and memory >= 1):
+        raise LayerstackError(f"predict: memory must be a number of bytes >= 1, got {memory!r}")
     wl = wavelength_nm if not is_concrete(wavelength_nm) else np.asarray(wavelength_nm, dtype=float)
     if np.ndim(wl) != 1:
         raise LayerstackError(f"wavelength_nm must be 1-D, got shape {np.shape(wl)}")
@@ -346,16 +551,25 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
         value = reflectance(stack, wl, geometry, nodes=nodes)
         value = jnp.broadcast_to(value, batch + value.shape)
         return np.array(value) if is_concrete((stack, wl, geometry)) else value
+    auto = isinstance(chunk, str)
     if any(_is_dask(leaf) for leaf in leaves):
-        return _predict_dask(leaves, treedef, lay, wl, geometry, nodes, int(chunk), int(step))
+        return _predict_dask(leaves, treedef, lay, wl, geometry, nodes, chunk if auto else int(chunk), int(step),
+                             memory)
     if not is_concrete((stack, wl, geometry)):
-        return _predict_traced(leaves, treedef, lay, wl, geometry, nodes, int(chunk))
-    chunk = int(min(chunk, n))
-    per_call = chunk * len(jax.local_devices())  # one chunk per device at least: equal device shares
-    step = int(-(-min(max(int(step), per_call), n) // per_call) * per_call)
+        return _predict_traced(leaves, treedef, lay, wl, geometry, nodes, DEFAULT_CHUNK if auto else int(chunk))
     batched = [(leaf, core) for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b]
     first = tuple(_rows(leaf, batch, core, np.zeros(1, int)) for leaf, core in batched)
-    fn = _compiled(stack, lay, wl, geometry, nodes, chunk, _optics_fixed_by(stack, lay.names, lay.batched), first)
+    use_optics = _optics_fixed_by(stack, lay.names, lay.batched)
+
+    def build(c):
+        return _compiled(stack, lay, wl, geometry, nodes, c, use_optics, first, with_key=True)
+
+    if auto:
+        chunk, step, fn = _resolve_auto_chunk(build, first, int(step), n, memory)
+    else:
+        chunk = int(min(chunk, n))
+        step = _step_for(step, chunk, n)
+        fn = build(chunk)[0]
     update = reporter(progress, n, desc="predict", unit="spectrum", auto=n > 100_000)
     t0 = time.perf_counter()
     flat_out = None
@@ -392,7 +606,7 @@ def _is_dask(x) -> bool:
     return type(x).__module__.startswith("dask.") and hasattr(x, "chunks")
 
 
-def _dask_block(*blocks, template, batched, core_ndim, wl, geometry, nodes, chunk, step, x64):
+def _dask_block(*blocks, template, batched, core_ndim, wl, geometry, nodes, chunk, step, x64, memory=None):
     """One block of :func:`_predict_dask`: the numpy path of :func:`predict` on the block's stacks
     (runs on a Dask worker: compiles once per worker process and structure, then reuses).
     ``template``: one stack of the batch (a pytree definition does not survive pickling)."""
@@ -404,13 +618,15 @@ def _dask_block(*blocks, template, batched, core_ndim, wl, geometry, nodes, chun
     batch = np.broadcast_shapes(*[leaf.shape[:leaf.ndim - k] for leaf, k, b in zip(leaves, core_ndim, batched) if b])
     stack = jax.tree_util.tree_unflatten(treedef, leaves)
     return predict(stack, wl, geometry, batch_shape=tuple(batch), chunk=chunk, step=step, progress=False,
-                   nodes=nodes)
+                   nodes=nodes, memory=memory)
 
 
-def _predict_dask(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int, step: int):
+def _predict_dask(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk, step: int,
+                  memory: Optional[int] = None):
     """:func:`predict` with Dask arrays among the batched leaves: a lazy Dask array
     ``(*batch, *angle, wl)``, one task per block of the batch (chunked like the Dask leaves),
-    computed on whatever scheduler is active (threads, processes, a ``distributed.Client``)."""
+    computed on whatever scheduler is active (threads, processes, a ``distributed.Client``).
+    ``chunk="auto"`` is resolved by each task where it runs (a worker's own memory limit)."""
     import dask.array as da
 
     batch = lay.batch_shape
@@ -438,7 +654,7 @@ def _predict_dask(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nod
         _dask_block, out_ind, *args, new_axes={f"t{i}": n for i, n in enumerate(tail.shape)}, concatenate=True,
         dtype=tail.dtype, meta=np.empty((0,) * len(out_ind), tail.dtype), template=one,
         batched=lay.batched, core_ndim=tuple(len(c) for c in lay.cores), wl=np.asarray(wl), geometry=geometry,
-        nodes=nodes, chunk=chunk, step=step, x64=bool(jax.config.jax_enable_x64))
+        nodes=nodes, chunk=chunk, step=step, x64=bool(jax.config.jax_enable_x64), memory=memory)
 
 
 def _predict_traced(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, nodes: int, chunk: int):

@@ -38,6 +38,15 @@ fitting — and writes maps into a zarr store, region by region:
   Workers run in the client's precision (``jax_enable_x64`` is set to the caller's value in
   the worker processes that run a region).
 * progress: pixels done, rate and ETA on a tqdm bar and in the ``fitting.cube`` logger.
+* ``chunk="auto"`` (the default) sizes the regions from the memory of where they run
+  (:func:`auto_region`): the budget is half (:data:`layerstack_jax._batched.MEMORY_FRACTION`)
+  of the smallest Dask worker's ``memory_limit`` per thread (``Client.scheduler_info()``), or of
+  this process's available memory (:func:`layerstack_jax._batched.memory_budget`) without a
+  cluster; the solver's memory is measured on the compiled solver for ``chunk_size`` fits (the
+  program every region runs: in this process the compilation is reused). The resolved region
+  size is what the job's fingerprint holds and the store records (attributes ``chunk``,
+  ``chunk_size``, ``chunk_sizing``); a resumed run with ``"auto"`` takes the store's own region
+  size, whatever memory the machine resuming it has.
 """
 
 from __future__ import annotations
@@ -46,6 +55,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import math
 import os
 import re
 import time
@@ -58,6 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from layerstack_jax import LayerstackError
+from layerstack_jax import _batched
 from layerstack_jax._cubes import open_cube
 from layerstack_jax._progress import reporter
 
@@ -65,7 +76,8 @@ from ._batch import fit_batch
 from ._objective import Objective
 from ._results import linearised_covariance
 
-__all__ = ["fit_cube", "CUBE_STATUS", "structural_degeneracy", "rank_at_start", "cube_regions"]
+__all__ = ["fit_cube", "CUBE_STATUS", "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
+           "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER"]
 
 log = logging.getLogger("fitting.cube")
 
@@ -80,6 +92,13 @@ CUBE_STATUS = {
 }
 
 _MARKERS = ".regions"  # suffix of the marker directory beside the store
+
+#: Largest ``chunk="auto"`` region (rows, columns): a lost region is cheap to redo.
+AUTO_REGION_MAX = (64, 64)
+#: ``chunk="auto"`` cuts at least this many regions per worker thread when the cube is large
+#: enough (regions of at least ``chunk_size`` pixels): every worker is fed, and the last regions
+#: do not leave the others idle for long.
+AUTO_REGIONS_PER_WORKER = 4
 _SAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
 
 
@@ -121,6 +140,128 @@ def cube_regions(shape: tuple, chunk: tuple) -> list:
     ty, tx = chunk
     return [(iy, ix, slice(iy * ty, min((iy + 1) * ty, ny)), slice(ix * tx, min((ix + 1) * tx, nx)))
             for iy in range(-(-ny // ty)) for ix in range(-(-nx // tx))]
+
+
+def _solver_memory(objective: Objective, method: str, chunk_size: int, bands: int, fit_opts: tuple) -> tuple:
+    """``(temp, argument, output)`` bytes of the compiled solver of :func:`~fitting.fit_batch`
+    for one call of ``chunk_size`` fits (``compiled.memory_analysis()``); the compilation is the
+    one ``fit_batch`` then reuses in this process."""
+    import inspect
+
+    from ._solve import HOST_METHODS, NEVER, SolverOptions, compiled_fit, starting_point
+
+    if method in HOST_METHODS:
+        raise LayerstackError(f"fit_cube: method {method!r} runs on the host one fit at a time; a cube needs a "
+                              "compiled solver: 'lm', 'gauss-newton', 'dogleg', 'bfgs' or 'lbfgsb'")
+    opts = {k: p.default for k, p in inspect.signature(fit_batch).parameters.items()
+            if k in ("rtol", "atol", "gtol", "max_steps", "sigma_tol")}
+    opts.update((k, v) for k, v in fit_opts if k in opts)
+    o = SolverOptions(method, opts["rtol"], opts["atol"], opts["gtol"], opts["max_steps"], opts["sigma_tol"])
+    args, _ = objective.batch_args([np.zeros((chunk_size, bands))])
+    y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
+    y0 = jnp.broadcast_to(y0, (chunk_size,) + y0.shape)
+    m = compiled_fit(objective, o, batched=True).lower(y0, args, objective.optics, NEVER).compile().memory_analysis()
+    if m is None:  # pragma: no cover - a backend without memory analysis
+        raise LayerstackError("fit_cube: chunk='auto' needs the compiled solver's memory analysis, which this JAX "
+                              "backend does not give: give chunk=(rows, columns)")
+    return int(m.temp_size_in_bytes), int(m.argument_size_in_bytes), int(m.output_size_in_bytes)
+
+
+def _region_shape(pixels: int, ny: int, nx: int, chunk_size: int, cap: tuple = AUTO_REGION_MAX) -> tuple:
+    """``(rows, columns)`` of a region of at most ``pixels``: about square — ``side`` rows
+    (``⌊√pixels⌋``, rounded down to a side whose square is a multiple of ``chunk_size`` where
+    possible) and as many columns as fill ``pixels`` (rounded down to a multiple of
+    ``chunk_size / gcd(side, chunk_size)``) — at most ``cap``; whole rows (columns) when the
+    image is narrower (shorter) than ``side``. A region whose pixels are a
+    multiple of ``chunk_size`` pads no solver call (when all its pixels are fitted)."""
+    if pixels >= ny * nx and ny <= cap[0] and nx <= cap[1]:
+        return ny, nx
+    side = max(math.isqrt(max(pixels, 1)), 1)
+    if nx <= side or ny <= side:  # a strip of whole rows (or columns)
+        width = min(nx, ny)
+        length = max(pixels // width, 1)
+        unit = chunk_size // math.gcd(width, chunk_size)  # length * width a multiple of chunk_size
+        if length >= unit:
+            length = length // unit * unit
+        return (min(length, ny), nx) if nx <= ny else (ny, min(length, nx))
+    unit = next(u for u in range(1, chunk_size + 1) if (u * u) % chunk_size == 0)
+    if side >= unit:  # rows: a side whose square is a multiple of chunk_size
+        side = side // unit * unit
+    side = min(side, ny, cap[0])
+    columns = min(pixels // side, nx, cap[1])  # as many as fill the region, rows x columns a multiple of chunk_size
+    unit = chunk_size // math.gcd(side, chunk_size)
+    if columns >= unit:
+        columns = columns // unit * unit
+    return side, columns
+
+
+def _budget_and_slots(c, memory: Optional[int]):
+    """``(MemoryBudget, worker threads)`` of where the regions run: this process (``c`` None),
+    or the smallest ``memory_limit`` per thread of the cluster's workers (public
+    ``Client.scheduler_info()``; this process's memory where the workers state no limit)."""
+    slots, budget = 1, None
+    if c is not None:
+        workers = c.scheduler_info(n_workers=-1).get("workers", {})
+        slots = max(sum(int(w.get("nthreads", 1) or 1) for w in workers.values()), 1)
+        per_thread = [(int(w["memory_limit"]) // max(int(w.get("nthreads", 1) or 1), 1), int(w["memory_limit"]),
+                       int(w.get("nthreads", 1) or 1)) for w in workers.values() if w.get("memory_limit")]
+        if per_thread:
+            share, limit, threads = min(per_thread)
+            f = _batched.MEMORY_FRACTION
+            budget = _batched.MemoryBudget(int(share * f), share, f,
+                                           f"smallest Dask worker memory_limit {limit / 1e6:.4g} MB / {threads} "
+                                           f"thread(s), {len(workers)} worker(s)")
+    if memory is not None:
+        budget = _batched.MemoryBudget(int(memory), int(memory), 1.0, "given (memory=)")
+    if budget is None:
+        budget = _batched.memory_budget()
+        if c is not None:
+            budget = budget._replace(source=budget.source + " of this process (the workers state no memory limit)")
+    return budget, slots
+
+
+def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *, chunk_size: int = 128,
+                method: str = "lm", fit_options: tuple = (), budget=None, slots: int = 1) -> tuple:
+    """The ``chunk="auto"`` region ``(rows, columns)`` of :func:`fit_cube` and how it was sized.
+
+    A region of ``p`` pixels needs (bytes)::
+
+        p * per_pixel + solver
+        per_pixel = bands * (itemsize + 16)          # the block as read, its float64 copy, the spectra fitted
+                  + 2 * (A + O) / chunk_size         # fit_batch's data and results of every fit on the host
+                  + 2 * maps                         # one pixel of every map, and its copy written to zarr
+        solver    = T + A + O                        # one call of the compiled solver (chunk_size fits)
+
+    ``T``, ``A``, ``O``: the temp, argument and output bytes of the compiled solver for
+    ``chunk_size`` fits (``compiled.memory_analysis()``, measured); ``maps``: the bytes of one
+    pixel of all the maps. ``p`` is the largest that fits ``budget`` (a
+    :class:`layerstack_jax._batched.MemoryBudget`; default: :func:`~layerstack_jax._batched.memory_budget`),
+    at most :data:`AUTO_REGION_MAX` and at most ``⌈pixels / (AUTO_REGIONS_PER_WORKER × slots)⌉``
+    (but not below ``chunk_size``: a smaller region would pad one solver call); then shaped by
+    :func:`_region_shape`. Raises :class:`LayerstackError` naming ``chunk`` when not even a region
+    of ``chunk_size`` pixels fits.
+
+    Returns ``((rows, columns), sizing)``, ``sizing`` a dict of the numbers used (bytes).
+    """
+    ny, nx = shape
+    budget = _batched.memory_budget() if budget is None else budget
+    temp, args, outs = _solver_memory(objective, method, chunk_size, bands, tuple(fit_options))
+    maps = sum(v.itemsize for v in _empty_maps((1, 1), tuple(objective.layout.names)).values())
+    per_pixel = bands * (itemsize + 16) + 2 * (args + outs) / chunk_size + 2 * maps
+    solver = temp + args + outs
+    least = solver + chunk_size * per_pixel
+    if budget.bytes < least:
+        raise LayerstackError(
+            f"fit_cube: chunk: the worker memory {budget.describe()} cannot hold one region of chunk_size="
+            f"{chunk_size} pixels, {least / 1e6:.4g} MB (the compiled solver {solver / 1e6:.4g} MB and "
+            f"{per_pixel / 1e3:.4g} kB per pixel): lower chunk_size, or give the workers more memory")
+    fits = int((budget.bytes - solver) // per_pixel)
+    feed = max(chunk_size, -(-ny * nx // (AUTO_REGIONS_PER_WORKER * max(int(slots), 1))))
+    pixels = min(fits, AUTO_REGION_MAX[0] * AUTO_REGION_MAX[1], feed)
+    region = _region_shape(pixels, ny, nx, chunk_size)
+    sizing = {"budget_bytes": int(budget.bytes), "budget_source": budget.describe(), "per_pixel_bytes": per_pixel,
+              "solver_bytes": solver, "solver_temp_bytes": temp, "memory_fit_pixels": fits, "worker_threads": slots}
+    return region, sizing
 
 
 @dataclasses.dataclass(frozen=True)
@@ -306,10 +447,11 @@ def _client(client, n_workers: int):
     raise LayerstackError(f"fit_cube: client must be None, 'processes', a distributed.Client or an address, got {client!r}")
 
 
-def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=None, chunk=(64, 64),
+def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=None, chunk="auto",
              saturation: Optional[float] = None, method: str = "lm", chunk_size: int = 128, client=None,
              n_workers: int = 2, resume: bool = True, progress: Union[bool, Callable[[int, int], None]] = True,
-             allow_degenerate: bool = False, wavelength_nm=None, variable: Optional[str] = None, **fit_options):
+             allow_degenerate: bool = False, wavelength_nm=None, variable: Optional[str] = None,
+             memory: Optional[int] = None, **fit_options):
     """Fit every pixel of ``cube`` with ``objective`` and write the maps to the zarr store ``out``
     (module docstring).
 
@@ -320,7 +462,9 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             path, an array ``(y, x, band)`` with ``wavelength_nm``, a DataArray).
         out: path of the zarr store written (created, or resumed).
         mask: optional boolean ``(y, x)``, True where pixels are to be fitted.
-        chunk: region size (rows, columns) in pixels: the unit of work, of writing and of resuming.
+        chunk: region size (rows, columns) in pixels: the unit of work, of writing and of
+            resuming; or ``"auto"`` (default): sized from the workers' memory (:func:`auto_region`),
+            or, resuming a store, the store's own region size.
         saturation: values >= this at a used band mark a pixel saturated (not fitted).
         method, chunk_size, fit_options: passed to :func:`~fitting.fit_batch` (``chunk_size``
             fits per compiled call; options e.g. ``max_steps``, ``rtol``, ``scale_covariance``).
@@ -330,12 +474,16 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             another job is an error); False starts afresh (the store is overwritten).
         progress: True for a progress bar, or a callable ``f(pixels_done, pixels_total)``.
         allow_degenerate: fit even an objective degenerate by construction (warned once).
+        memory: bytes one region may fill for ``chunk="auto"`` (default: measured where the
+            regions run: :func:`_budget_and_slots`).
 
     Returns:
         :class:`xarray.Dataset` (lazy, opened from ``out``): maps ``(y, x)`` of every free
         parameter component (its own unit: nm, 1/nm, dimensionless) and ``<name>_stderr``,
         ``chi2``, ``reduced_chi2``, ``num_steps``, ``converged``, ``result_code``, ``rank``,
-        ``identifiable``, ``status`` (:data:`CUBE_STATUS`); attributes name the parameters.
+        ``identifiable``, ``status`` (:data:`CUBE_STATUS`); attributes name the parameters and
+        record the region size (``chunk``, ``chunk_size``, and for ``"auto"`` ``chunk_sizing``:
+        the budget and the measured bytes it came from).
     """
     import xarray as xr
 
@@ -343,11 +491,17 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
     cube = open_cube(cube, wavelength_nm, variable=variable)
     used_bands = _check_objective(objective, cube)
     ny, nx = cube.sizes["y"], cube.sizes["x"]
-    chunk = tuple(int(c) for c in chunk)
-    if len(chunk) != 2 or min(chunk) < 1:
-        raise LayerstackError(f"fit_cube: chunk must be (rows, columns) >= 1, got {chunk!r}")
+    auto = isinstance(chunk, str)
+    if auto and chunk != "auto":
+        raise LayerstackError(f"fit_cube: chunk must be (rows, columns) >= 1 or 'auto', got {chunk!r}")
+    if not auto:
+        chunk = tuple(int(c) for c in chunk)
+        if len(chunk) != 2 or min(chunk) < 1:
+            raise LayerstackError(f"fit_cube: chunk must be (rows, columns) >= 1 or 'auto', got {chunk!r}")
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"fit_cube: chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if memory is not None and not (isinstance(memory, (int, np.integer)) and memory >= 1):
+        raise LayerstackError(f"fit_cube: memory must be a number of bytes >= 1, got {memory!r}")
     if mask is not None:
         mask = np.asarray(getattr(mask, "values", mask))
         if mask.dtype != bool or mask.shape != (ny, nx):
@@ -369,50 +523,70 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
     if len({_var(n) for n in names}) != len(names):
         raise LayerstackError(f"fit_cube: parameter names {names} collide once made zarr-safe: name the parameters")
     out = str(out)
-    fp = _fingerprint(objective, cube, chunk, method, chunk_size, saturation, mask, fit_opts)
-    attrs = {"fit_cube_job": fp, "parameters": json.dumps(list(names)),
-             "parameter_variables": json.dumps([_var(n) for n in names]), "method": method,
-             "status_codes": json.dumps({str(k): v for k, v in CUBE_STATUS.items()}), "chunk": json.dumps(list(chunk)),
-             "source": str(cube.attrs.get("source", "array"))}
     existing = Path(out).exists()
+    stored = None
     if existing and resume:
         try:
-            old = xr.open_zarr(out, consolidated=False).attrs.get("fit_cube_job")
+            stored = dict(xr.open_zarr(out, consolidated=False).attrs)
         except Exception:
-            old = None
-        if old != fp:
-            raise LayerstackError(f"fit_cube: {out} holds the maps of another job (objective, cube or settings "
-                                  "differ): choose another store, or resume=False to overwrite it")
-    else:
-        _init_store(out, cube, names, chunk, attrs)
-    regions = cube_regions((ny, nx), chunk)
-    pending = [r for r in regions if not _marker(out, r[0], r[1]).exists()]
-    done_px = sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in regions) - \
-        sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in pending)
-    total = ny * nx
-    if len(pending) < len(regions):
-        log.info("fit_cube: resuming %s: %d of %d regions already written", out, len(regions) - len(pending), len(regions))
-    settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
-                         bool(jax.config.jax_enable_x64))
-    report = reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
-    t0 = time.perf_counter()
-    done0 = done_px
-
-    def finished(summary):
-        nonlocal done_px
-        done_px += summary["pixels"]
-        rate = (done_px - done0) / max(time.perf_counter() - t0, 1e-9)
-        eta = (total - done_px) / rate if rate > 0 else float("inf")
-        log.info("fit_cube: region %s: %d pixels (%d fitted) in %.3g s; %d/%d pixels, %.4g px/s, ETA %.0f s",
-                 summary["region"], summary["pixels"], summary["fitted"], summary["seconds"], done_px, total, rate, eta)
-        if report is not None:
-            report(done_px)
-
-    def block_of(ys, xs):
-        return cube.isel(y=ys, x=xs), None if mask is None else mask[ys, xs]
-
+            stored = {}
     c, owned = _client(client, n_workers)
     try:
+        sizing = None
+        if auto and stored and "chunk" in stored:  # resuming: the store's regions, whatever this machine's memory
+            chunk = tuple(int(v) for v in json.loads(stored["chunk"]))
+            log.info("fit_cube: chunk auto -> the store's regions of %d x %d pixels (resuming %s)", *chunk, out)
+        elif auto:
+            budget, slots = _budget_and_slots(c, memory)
+            chunk, sizing = auto_region(objective, (ny, nx), int(cube.sizes["wavelength"]), cube.dtype.itemsize,
+                                        chunk_size=chunk_size, method=method, fit_options=fit_opts, budget=budget,
+                                        slots=slots)
+            log.info("fit_cube: chunk auto -> regions of %d x %d pixels (%d regions, %d worker thread(s)); "
+                     "chunk_size %d; measured: the compiled solver %.4g MB per call, %.4g kB per pixel; "
+                     "budget %s (fits %d pixels)", chunk[0], chunk[1], len(cube_regions((ny, nx), chunk)), slots,
+                     chunk_size, sizing["solver_bytes"] / 1e6, sizing["per_pixel_bytes"] / 1e3,
+                     sizing["budget_source"], sizing["memory_fit_pixels"])
+        fp = _fingerprint(objective, cube, chunk, method, chunk_size, saturation, mask, fit_opts)
+        attrs = {"fit_cube_job": fp, "parameters": json.dumps(list(names)),
+                 "parameter_variables": json.dumps([_var(n) for n in names]), "method": method,
+                 "status_codes": json.dumps({str(k): v for k, v in CUBE_STATUS.items()}),
+                 "chunk": json.dumps(list(chunk)), "chunk_size": int(chunk_size),
+                 "chunk_sizing": json.dumps(sizing if sizing is not None else "given"),
+                 "source": str(cube.attrs.get("source", "array"))}
+        if stored is not None:
+            if stored.get("fit_cube_job") != fp:
+                raise LayerstackError(f"fit_cube: {out} holds the maps of another job (objective, cube or settings "
+                                      "differ): choose another store, or resume=False to overwrite it")
+        else:
+            _init_store(out, cube, names, chunk, attrs)
+        regions = cube_regions((ny, nx), chunk)
+        pending = [r for r in regions if not _marker(out, r[0], r[1]).exists()]
+        done_px = sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in regions) - \
+            sum((r[2].stop - r[2].start) * (r[3].stop - r[3].start) for r in pending)
+        total = ny * nx
+        if len(pending) < len(regions):
+            log.info("fit_cube: resuming %s: %d of %d regions already written", out, len(regions) - len(pending),
+                     len(regions))
+        settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
+                             bool(jax.config.jax_enable_x64))
+        report = reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
+        t0 = time.perf_counter()
+        done0 = done_px
+
+        def finished(summary):
+            nonlocal done_px
+            done_px += summary["pixels"]
+            rate = (done_px - done0) / max(time.perf_counter() - t0, 1e-9)
+            eta = (total - done_px) / rate if rate > 0 else float("inf")
+            log.info("fit_cube: region %s: %d pixels (%d fitted) in %.3g s; %d/%d pixels, %.4g px/s, ETA %.0f s",
+                     summary["region"], summary["pixels"], summary["fitted"], summary["seconds"], done_px, total, rate,
+                     eta)
+            if report is not None:
+                report(done_px)
+
+        def block_of(ys, xs):
+            return cube.isel(y=ys, x=xs), None if mask is None else mask[ys, xs]
+
         if c is None:
             for iy, ix, ys, xs in pending:
                 blk, m = block_of(ys, xs)

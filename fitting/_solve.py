@@ -380,8 +380,9 @@ def jacobian_with_statistics(objective: Objective):
         return r, (by, J)
 
     # jitted: optimistix traces the primal for its shapes and the JVP rule below for the solve;
-    # the second trace is then a cache hit (inlined by XLA: nothing changes at run time)
-    evaluate = jax.jit(evaluate)
+    # the second trace is then a cache hit (inlined by XLA: nothing changes at run time) — in
+    # the same abstract-mesh context (_traced_once), else JAX's tracing cache misses
+    evaluate = _traced_once(jax.jit(evaluate))
 
     @jax.custom_jvp
     def g(u, args_optics):
@@ -398,6 +399,24 @@ def jacobian_with_statistics(objective: Objective):
 
     g.defjvp(g_jvp, symbolic_zeros=True)
     return g
+
+
+def _traced_once(jitted: Callable) -> Callable:
+    """``jitted`` called with JAX's abstract-mesh context made explicit (the ambient mesh, or
+    the empty one where none is set: a no-op for the computation), so that its trace is found
+    again in JAX's tracing cache whichever context calls it.
+
+    Optimistix calls the residual function first in a structure pass (``eval_shape`` /
+    ``closure_convert``, where that context is unset, ``None``) and then in the solve's loop
+    (where JAX has set it to the empty mesh): the two cache keys differ in that field alone
+    and the model's Jacobian — most of a fit's tracing time — was traced twice
+    (``jax_explain_cache_misses``: "abstract_mesh_context_manager differs")."""
+
+    def call(*args):
+        with jax.sharding.use_abstract_mesh(jax.sharding.get_abstract_mesh()):
+            return jitted(*args)
+
+    return call
 
 
 def _with_args_tangent(out, of_args: Callable, args, dargs):

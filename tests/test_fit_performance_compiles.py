@@ -160,3 +160,27 @@ def test_compiled_fit_of_table_materials_holds_no_host_callback():
     f = jax.jit(lambda w: ls.ellipsometry(stack(100.0), w, np.asarray([60.0])).psi_deg)
     with pytest.raises(Exception, match="outside the data range"):
         jax.block_until_ready(f(jnp.asarray([150.0, 500.0])))
+
+
+@pytest.mark.parametrize("method", ["lm", "gauss-newton", "dogleg"])
+def test_compiling_a_fit_traces_the_model_once(method, monkeypatch):
+    """Compiling a least-squares fit traces the model (``Objective.predict``, and with it the
+    forward-mode Jacobian around it) once: optimistix calls the residual function in a
+    structure pass and again in its loop, under different abstract-mesh contexts, which made
+    JAX's tracing cache miss and the model — most of a fit's tracing time — be traced twice
+    (``fitting._solve._traced_once``). Counted in Python calls of ``predict``, for a single fit
+    and a batched one; a second fit traces nothing."""
+    data = _data(0)[:1]
+    obj = ft.Objective(_stack(115.0, 1.54, TRUTH[2]), WL, [ft.Dataset(ls.Ellipsometric(ANGLES[0], "psi"), data[0], sigma=SIGMA)],
+                       [ft.thickness("film", lower=20.0, upper=300.0), ft.dispersion("film", "A")])
+    calls = []
+    predict = ft.Objective.predict
+    monkeypatch.setattr(ft.Objective, "predict", lambda self, *a, **k: calls.append(1) or predict(self, *a, **k))
+    assert ft.fit(obj, method=method).converged
+    assert len(calls) == 1, len(calls)
+    ft.fit(obj, method=method)
+    assert len(calls) == 1, len(calls)
+    del calls[:]
+    batch = ft.fit_batch(obj, np.concatenate([data[0], _data(1)[0]]), method=method, progress=False)
+    assert np.all(np.asarray(batch.converged))
+    assert len(calls) == 1, len(calls)

@@ -36,6 +36,16 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _positive_int_or_auto(text: str):
+    """``"auto"`` or a positive integer (sizes chosen from the memory available, or given)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return _positive_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a positive integer, got {text!r}") from None
+
+
 def _parse_geometries(texts: list[str]) -> list[tuple[str, object]]:
     """``[(column name, Geometry)]`` for the requested geometries, validated before any work
     (each geometry names its own columns: ``specular:θ`` gives ``R_θ, T_θ, A_θ``)."""

@@ -1,4 +1,4 @@
-"""``layerstack fit-cube MODEL.toml CUBE -o maps.zarr [-g GEOM] [--mask MASK] [--chunk N] [--scheduler ADDRESS]``.
+"""``layerstack fit-cube MODEL.toml CUBE -o maps.zarr [-g GEOM] [--mask MASK] [--chunk auto|N] [--scheduler ADDRESS]``.
 
 Fits every pixel spectrum of a hyperspectral cube with the free parameters of a stack file
 (the MODEL.toml of ``layerstack fit``) through :func:`fitting.fit_cube`: region by region into
@@ -18,7 +18,7 @@ import numpy as np
 from layerstack_jax import DEFAULT_NODES, LayerstackError
 from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
 
-from ._common import PROG, _positive_int, _precision, _resolve_geometry
+from ._common import PROG, _positive_int, _positive_int_or_auto, _precision, _resolve_geometry
 
 #: Unit of a fitted parameter by its kind (``fitting.Parameter.kind``): colour-bar labels.
 _UNITS = {"thickness": "nm", "alpha": "1/nm", "rho_g": "dimensionless", "n": "dimensionless",
@@ -56,8 +56,11 @@ def _add_fit_cube_parser(sub) -> None:
     p.add_argument("--mask", metavar="MASK",
                    help=f"pixels to fit: {_MASK_FORMATS}, shaped (rows, columns) like the cube's image; true or "
                         "non-zero = fit, false or 0 = leave out (status 1)")
-    p.add_argument("--chunk", type=_positive_int, default=64, metavar="N",
-                   help="region size N x N pixels (default 64): the unit of work, of writing and of resuming")
+    p.add_argument("--chunk", type=_positive_int_or_auto, default="auto", metavar="auto|N",
+                   help="region size N x N pixels: the unit of work, of writing and of resuming; 'auto' (default) "
+                        "sizes the regions from the memory of the workers (of this process without --scheduler): "
+                        "at most 64 x 64, at least 4 regions per worker thread on a large cube; a resumed store "
+                        "keeps its own regions")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the regions on a Dask cluster: a scheduler address (tcp://host:8786), or 'processes' "
                         "for a local cluster of --workers processes (default: this process)")
@@ -170,18 +173,44 @@ def _read_mask(path: str, shape: tuple) -> np.ndarray:
     return m
 
 
-def _regions_written(out: Path, shape: tuple, chunk: int) -> tuple[int, int, int]:
+def _regions_written(out: Path, shape: tuple, chunk) -> tuple[int, int, int]:
     """``(regions written, regions, pixels written)`` of a store from an earlier run: its completion
-    markers ``<out>.regions/<iy>_<ix>`` (the layout :func:`fitting.fit_cube` documents)."""
+    markers ``<out>.regions/<iy>_<ix>`` (the layout :func:`fitting.fit_cube` documents). With
+    ``chunk="auto"`` the regions are the store's own (its ``chunk`` attribute)."""
+    import json
+
     from fitting import cube_regions
 
-    regions = cube_regions(shape, (chunk, chunk))
     markers = Path(str(out).rstrip("/") + ".regions")
     if not out.exists() or not markers.is_dir():
-        return 0, len(regions), 0
+        return 0, 0, 0
+    if chunk == "auto":
+        import xarray as xr
+
+        try:
+            tile = tuple(json.loads(xr.open_zarr(out, consolidated=False).attrs["chunk"]))
+        except Exception:  # not a store of fit_cube: fit_cube says so
+            return 0, 0, 0
+    else:
+        tile = (chunk, chunk)
+    regions = cube_regions(shape, tile)
     done = [(ys.stop - ys.start) * (xs.stop - xs.start) for iy, ix, ys, xs in regions
             if (markers / f"{iy}_{ix}").exists()]
     return len(done), len(regions), sum(done)
+
+
+def _regions_line(maps) -> str:
+    """How the store's regions were sized: ``regions of R x C pixels (...)`` from its attributes."""
+    import json
+
+    rows, cols = json.loads(maps.attrs["chunk"])
+    sizing = json.loads(maps.attrs.get("chunk_sizing", '"given"'))
+    if isinstance(sizing, dict):
+        how = (f"auto: budget {sizing['budget_source']}; measured {sizing['per_pixel_bytes'] / 1e3:.4g} kB per pixel, "
+               f"{sizing['solver_bytes'] / 1e6:.4g} MB per solver call")
+    else:
+        how = "given (--chunk)" if sizing == "given" else str(sizing)
+    return f"regions of {rows} x {cols} pixels, {maps.attrs.get('chunk_size', '?')} pixels per solver call ({how})"
 
 
 # ----------------------------------------------------------------------------- outputs
@@ -348,7 +377,8 @@ def _cmd_fit_cube(args) -> int:
         logger.setLevel(logging.INFO)
         t0 = time.perf_counter()
         try:
-            maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=(args.chunk, args.chunk),
+            chunk = args.chunk if args.chunk == "auto" else (args.chunk, args.chunk)
+            maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=chunk,
                                     saturation=args.saturation, method=args.method, chunk_size=args.batch,
                                     client=args.scheduler, n_workers=args.workers, resume=not args.restart,
                                     progress=not args.quiet, allow_degenerate=args.allow_degenerate,
@@ -367,6 +397,7 @@ def _cmd_fit_cube(args) -> int:
     lines = _summary(maps, args.sigma is not None, wavelength.size - objective.n_parameters, seconds,
                      shape[0] * shape[1] - done_px)
     print(f"{PROG}: wrote {out} ({len(units)} parameter map(s) and their standard errors; progress log {log_path})")
+    print(f"{PROG}: {_regions_line(maps)}")
     print("\n".join(lines))
     if not args.no_quicklook:
         directory = Path(args.quicklook) if args.quicklook else out.with_name(

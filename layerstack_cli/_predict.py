@@ -12,7 +12,7 @@ from layerstack_jax import DEFAULT_NODES, Ellipsometric, LayerstackError, check_
 from layerstack_jax.io import (check_instrument_used, instrument_geometry, load_instrument, load_stack, parse_values,
                                parse_wavelengths, save_spectra_csv)
 
-from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _precision
+from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _positive_int_or_auto, _precision
 
 def _add_predict_parser(sub) -> None:
     p = sub.add_parser(
@@ -53,6 +53,9 @@ def _add_predict_parser(sub) -> None:
                         "(varnish.thickness_nm=10000; with several geometry columns prefixed 'GEOM ')")
     p.add_argument("--vary-table", metavar="FILE.csv",
                    help="like --vary, one sample per row: a CSV whose header names LAYER.FIELD columns")
+    p.add_argument("--chunk", type=_positive_int_or_auto, default="auto", metavar="auto|N",
+                   help="with --vary/--vary-table: spectra computed together in one vectorised block; 'auto' "
+                        "(default) sizes it from the memory available (at most 8 on CPU), N fixes it")
     p.add_argument("--digits", type=_positive_int, default=10, metavar="N",
                    help="significant digits written in the CSV (default 10; 17 keeps float64 exactly)")
     p.set_defaults(func=_cmd_predict)
@@ -201,7 +204,8 @@ def _predict_batch(args, stack, wavelength, requested) -> tuple[dict, dict]:
     columns, geometries = {}, {}
     for gname, geometry in requested:
         try:
-            spectra = predict(batched, wavelength, geometry, batch_shape=(values.shape[0],), nodes=args.nodes)
+            spectra = predict(batched, wavelength, geometry, batch_shape=(values.shape[0],), nodes=args.nodes,
+                              chunk=args.chunk)
         except LayerstackError as e:
             raise LayerstackError(f"geometry {gname!r}: {e}") from None
         for label, spectrum in zip(labels, np.asarray(spectra, dtype=float)):

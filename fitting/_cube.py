@@ -43,7 +43,8 @@ fitting — and writes maps into a zarr store, region by region:
   of the smallest Dask worker's ``memory_limit`` per thread (``Client.scheduler_info()``), or of
   this process's available memory (:func:`layerstack_jax._batched.memory_budget`) without a
   cluster; the solver's memory is measured on the compiled solver for ``chunk_size`` fits (the
-  program every region runs: in this process the compilation is reused). The resolved region
+  program every region runs: in this process the compilation is reused; with a cluster this
+  process compiles it once more, to measure it). The resolved region
   size is what the job's fingerprint holds and the store records (attributes ``chunk``,
   ``chunk_size``, ``chunk_sizing``); a resumed run with ``"auto"`` takes the store's own region
   size, whatever memory the machine resuming it has.
@@ -93,7 +94,8 @@ CUBE_STATUS = {
 
 _MARKERS = ".regions"  # suffix of the marker directory beside the store
 
-#: Largest ``chunk="auto"`` region (rows, columns): a lost region is cheap to redo.
+#: Largest ``chunk="auto"`` region, rows × columns pixels (a strip of the same area may be
+#: chosen on a narrow image): a lost region is cheap to redo.
 AUTO_REGION_MAX = (64, 64)
 #: ``chunk="auto"`` cuts at least this many regions per worker thread when the cube is large
 #: enough (regions of at least ``chunk_size`` pixels): every worker is fed, and the last regions
@@ -167,32 +169,30 @@ def _solver_memory(objective: Objective, method: str, chunk_size: int, bands: in
     return int(m.temp_size_in_bytes), int(m.argument_size_in_bytes), int(m.output_size_in_bytes)
 
 
-def _region_shape(pixels: int, ny: int, nx: int, chunk_size: int, cap: tuple = AUTO_REGION_MAX) -> tuple:
-    """``(rows, columns)`` of a region of at most ``pixels``: about square — ``side`` rows
-    (``⌊√pixels⌋``, rounded down to a side whose square is a multiple of ``chunk_size`` where
-    possible) and as many columns as fill ``pixels`` (rounded down to a multiple of
-    ``chunk_size / gcd(side, chunk_size)``) — at most ``cap``; whole rows (columns) when the
-    image is narrower (shorter) than ``side``. A region whose pixels are a
-    multiple of ``chunk_size`` pads no solver call (when all its pixels are fitted)."""
-    if pixels >= ny * nx and ny <= cap[0] and nx <= cap[1]:
-        return ny, nx
-    side = max(math.isqrt(max(pixels, 1)), 1)
-    if nx <= side or ny <= side:  # a strip of whole rows (or columns)
-        width = min(nx, ny)
-        length = max(pixels // width, 1)
-        unit = chunk_size // math.gcd(width, chunk_size)  # length * width a multiple of chunk_size
-        if length >= unit:
-            length = length // unit * unit
-        return (min(length, ny), nx) if nx <= ny else (ny, min(length, nx))
-    unit = next(u for u in range(1, chunk_size + 1) if (u * u) % chunk_size == 0)
-    if side >= unit:  # rows: a side whose square is a multiple of chunk_size
-        side = side // unit * unit
-    side = min(side, ny, cap[0])
-    columns = min(pixels // side, nx, cap[1])  # as many as fill the region, rows x columns a multiple of chunk_size
-    unit = chunk_size // math.gcd(side, chunk_size)
-    if columns >= unit:
-        columns = columns // unit * unit
-    return side, columns
+def _solver_calls(rows: int, cols: int, ny: int, nx: int, chunk_size: int) -> tuple:
+    """``(solver calls, regions)`` of an ``(ny, nx)`` image cut in ``rows x cols`` tiles, every
+    pixel fitted (each region's pixels padded to a multiple of ``chunk_size``)."""
+    r_sizes = [(rows, ny // rows)] + ([(ny % rows, 1)] if ny % rows else [])
+    c_sizes = [(cols, nx // cols)] + ([(nx % cols, 1)] if nx % cols else [])
+    calls = sum(-(-(r * c) // chunk_size) * nr * nc for r, nr in r_sizes for c, nc in c_sizes)
+    return calls, sum(n for _, n in r_sizes) * sum(n for _, n in c_sizes)
+
+
+def _region_shape(pixels: int, ny: int, nx: int, chunk_size: int) -> tuple:
+    """``(rows, columns)`` of the regions of at most ``pixels`` pixels that cut an ``(ny, nx)``
+    image into the fewest solver calls of ``chunk_size`` fits (the least padding); among those,
+    within 5 % of the fewest regions, the squarest (then the widest)."""
+    pixels = max(int(pixels), 1)
+    found = []
+    for rows in range(1, min(ny, pixels) + 1):
+        cols = min(nx, pixels // rows)
+        found.append((*_solver_calls(rows, cols, ny, nx, chunk_size), rows, cols))
+    calls = min(f[0] for f in found)
+    found = [f for f in found if f[0] == calls]
+    regions = min(f[1] for f in found)
+    found = [f for f in found if f[1] <= 1.05 * regions]
+    _, _, rows, cols = min(found, key=lambda f: (abs(f[2] - f[3]), f[1], -f[3]))
+    return rows, cols
 
 
 def _budget_and_slots(c, memory: Optional[int]):
@@ -201,7 +201,11 @@ def _budget_and_slots(c, memory: Optional[int]):
     ``Client.scheduler_info()``; this process's memory where the workers state no limit)."""
     slots, budget = 1, None
     if c is not None:
-        workers = c.scheduler_info(n_workers=-1).get("workers", {})
+        try:
+            info = c.scheduler_info(n_workers=-1)  # every worker (newer distributed shows 5 by default)
+        except TypeError:  # pragma: no cover - distributed before n_workers=
+            info = c.scheduler_info()
+        workers = info.get("workers", {})
         slots = max(sum(int(w.get("nthreads", 1) or 1) for w in workers.values()), 1)
         per_thread = [(int(w["memory_limit"]) // max(int(w.get("nthreads", 1) or 1), 1), int(w["memory_limit"]),
                        int(w.get("nthreads", 1) or 1)) for w in workers.values() if w.get("memory_limit")]
@@ -236,9 +240,10 @@ def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *
     ``chunk_size`` fits (``compiled.memory_analysis()``, measured); ``maps``: the bytes of one
     pixel of all the maps. ``p`` is the largest that fits ``budget`` (a
     :class:`layerstack_jax._batched.MemoryBudget`; default: :func:`~layerstack_jax._batched.memory_budget`),
-    at most :data:`AUTO_REGION_MAX` and at most ``⌈pixels / (AUTO_REGIONS_PER_WORKER × slots)⌉``
-    (but not below ``chunk_size``: a smaller region would pad one solver call); then shaped by
-    :func:`_region_shape`. Raises :class:`LayerstackError` naming ``chunk`` when not even a region
+    at most :data:`AUTO_REGION_MAX` (in pixels) and at most
+    ``⌈pixels / (AUTO_REGIONS_PER_WORKER × slots)⌉`` (but not below ``chunk_size``: a smaller
+    region would pad one solver call); then shaped by :func:`_region_shape` (the fewest padded
+    solver calls over the image). Raises :class:`LayerstackError` naming ``chunk`` when not even a region
     of ``chunk_size`` pixels fits.
 
     Returns ``((rows, columns), sizing)``, ``sizing`` a dict of the numbers used (bytes).
@@ -258,7 +263,7 @@ def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *
     fits = int((budget.bytes - solver) // per_pixel)
     feed = max(chunk_size, -(-ny * nx // (AUTO_REGIONS_PER_WORKER * max(int(slots), 1))))
     pixels = min(fits, AUTO_REGION_MAX[0] * AUTO_REGION_MAX[1], feed)
-    region = _region_shape(pixels, ny, nx, chunk_size)
+    region = _region_shape(min(pixels, ny * nx), ny, nx, chunk_size)
     sizing = {"budget_bytes": int(budget.bytes), "budget_source": budget.describe(), "per_pixel_bytes": per_pixel,
               "solver_bytes": solver, "solver_temp_bytes": temp, "memory_fit_pixels": fits, "worker_threads": slots}
     return region, sizing

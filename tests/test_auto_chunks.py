@@ -222,7 +222,7 @@ def test_cli_fit_cube_auto_regions_and_resume(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- a Dask worker
 @pytest.mark.slow
-def test_the_budget_inside_a_local_cluster_worker_is_its_memory_limit():
+def test_the_budget_inside_a_local_cluster_worker_is_its_memory_limit(tmp_path):
     distributed = pytest.importorskip("distributed")
     from fitting._cube import _budget_and_slots
 
@@ -234,3 +234,17 @@ def test_the_budget_inside_a_local_cluster_worker_is_its_memory_limit():
         assert "Dask worker" in remote.source and "memory_limit" in remote.source
         here, slots = _budget_and_slots(client, None)  # what fit_cube sees from the client
         assert here.available == limit and here.bytes == limit // 2 and slots == 1
+        assert "Dask worker memory_limit" in here.source
+        # fit_cube sizes its regions from it, and predict's blocks resolve "auto" on the worker
+        maps = fit_cube(OBJECTIVE, CUBE, wavelength_nm=WL, out=tmp_path / "maps.zarr", chunk_size=CHUNK_SIZE,
+                        progress=False, client=client)
+        sizing = json.loads(maps.attrs["chunk_sizing"])
+        assert sizing["budget_bytes"] == limit // 2 and "Dask worker memory_limit" in sizing["budget_source"]
+        local = fit_cube(OBJECTIVE, CUBE, wavelength_nm=WL, out=tmp_path / "local.zarr", chunk_size=CHUNK_SIZE,
+                         progress=False, chunk=tuple(json.loads(maps.attrs["chunk"])))
+        for name in maps.data_vars:
+            np.testing.assert_array_equal(maps[name].values, local[name].values, err_msg=name)
+        import dask.array as da
+
+        lazy = predict(_film(da.from_array(H, chunks=(5, 1))), WL, GEOMETRY)
+        np.testing.assert_array_equal(lazy.compute(), predict(_film(H), WL, GEOMETRY))

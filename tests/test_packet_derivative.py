@@ -2,7 +2,7 @@
 its forward: ``_packet_sweep``) against JAX's own derivative of a plain packet written out here
 (:func:`_plain_packet`: ``jnp.sqrt``, the Fresnel formulas, ``jnp.exp`` and complex division,
 no custom rule): values to 1e-13, forward and reverse derivatives to 1e-12, for every kind of
-tangent alone and all together, from one film to eleven, with an opaque
+tangent alone and all together, from one film to eleven (short packets by both rules), with an opaque
 metal film (its phase factor underflows) and an absorbing exit medium; and through the public
 API (``specular``) with the library's ``_packet`` swapped for the plain one. Also
 ``_fresnel.reciprocal`` against numpy.
@@ -82,8 +82,22 @@ _MASKS = [(0, 0, 1, 0, 0), (1, 0, 0, 0, 0), (0, 1, 0, 0, 0), (0, 0, 0, 1, 0), (0
           (1, 1, 1, 1, 1)]
 
 
+_THRESHOLD = _coherent._SCAN_THRESHOLD  # before any test lowers it
+
+
+@pytest.fixture(params=["default", "sweep"])
+def path(request, monkeypatch):
+    """Short packets take the stored-coefficient rule by default; "sweep" forces the loop form
+    (``_packet_jvp_sweep``) for any number of films."""
+    if request.param == "sweep":
+        monkeypatch.setattr(_coherent, "_SCAN_THRESHOLD", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("films,metal", [(1, False), (3, True), (11, True)])
-def test_packet_matches_plain_values_and_derivatives(films, metal):
+def test_packet_matches_plain_values_and_derivatives(films, metal, path):
+    if films > _THRESHOLD and path == "sweep":
+        pytest.skip("the default already")
     rng = np.random.default_rng(100 + films)
     args = _inputs(rng, films, metal)
     tangents = _tangents(rng, args)
@@ -141,7 +155,7 @@ def test_thickness_gradient_of_reflectance_only():
 
 
 @pytest.mark.parametrize("kind", ["thickness", "index"])
-def test_specular_derivatives_match_plain_packet(kind, monkeypatch):
+def test_specular_derivatives_match_plain_packet(kind, path, monkeypatch):
     """Through the public API: jacfwd and jacrev of all four intensities equal those with the
     library's packet replaced by the plain one (no custom rule)."""
     wl = jnp.array([400.0, 533.0, 650.0, 780.0])

@@ -108,3 +108,11 @@ def compiles(f, *args, **kwargs):
     finally:
         _COMPILES["on"] = False
     return out, _COMPILES["n"]
+
+
+def relative_error(a, b) -> float:
+    """max |a - b| / max |b| (the absolute error where b is empty or all zero)."""
+    a, b = np.asarray(a), np.asarray(b)
+    scale = np.max(np.abs(b), initial=0.0)
+    err = np.max(np.abs(a - b), initial=0.0)
+    return float(err / scale) if scale > 0 else float(err)

@@ -43,7 +43,9 @@ def _peak_rss() -> int:
 def main(argv=None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--size", type=int, nargs=2, default=[100, 100])
-    p.add_argument("--chunk", type=int, nargs=2, default=[25, 25])
+    p.add_argument("--chunk", nargs="+", default=["25", "25"],
+                   help="region rows columns (also the zarr store's chunks), or 'auto': fit_cube sizes the regions "
+                        "from the memory available (the store then chunked 25 x 25)")
     p.add_argument("--chunk-size", type=int, default=100, help="fits per compiled fit_batch call")
     p.add_argument("--client", default=None, help="None (this process), 'processes', or a scheduler address")
     p.add_argument("--dir", default=None, help="where to write the cube and the maps (default: a temporary dir)")
@@ -65,6 +67,10 @@ def main(argv=None) -> dict:
     from .fitting_cases import SIGMA, WL, _f1_stack
 
     ny, nx = a.size
+    region = "auto" if a.chunk == ["auto"] else tuple(int(v) for v in a.chunk)
+    if region != "auto" and len(region) != 2:
+        raise SystemExit("--chunk: two integers (rows columns) or 'auto'")
+    a.region, a.chunk = region, ([25, 25] if region == "auto" else list(region))  # fit_cube's regions, the store's chunks
     rng = np.random.default_rng(1)
     B = fitting.bspline_basis(WL, 3)
     h = rng.uniform(15_000.0, 30_000.0, (ny, nx))
@@ -103,7 +109,7 @@ def main(argv=None) -> dict:
     out = work / "maps.zarr"
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.perf_counter()
-    maps = fit_cube(obj, lazy, out=out, chunk=tuple(a.chunk), chunk_size=a.chunk_size, client=a.client,
+    maps = fit_cube(obj, lazy, out=out, chunk=a.region, chunk_size=a.chunk_size, client=a.client,
                     resume=False, progress=False).load()
     t_cube = time.perf_counter() - t0
     load1 = os.getloadavg()
@@ -111,7 +117,8 @@ def main(argv=None) -> dict:
     names = json.loads(maps.attrs["parameter_variables"])
     x = np.stack([maps[n].values.ravel()[status == 0] for n in names], axis=1)
     agree = float(np.max(np.abs(x - ref.x) / np.maximum(np.abs(ref.x), 1e-300)))
-    res = {"size": [ny, nx], "wavelengths": int(WL.size), "chunk": a.chunk, "chunk_size": a.chunk_size,
+    res = {"size": [ny, nx], "wavelengths": int(WL.size), "chunk": a.chunk, "regions": json.loads(maps.attrs["chunk"]),
+           "region_sizing": json.loads(maps.attrs.get("chunk_sizing", '"given"')), "chunk_size": a.chunk_size,
            "client": a.client, "pixels_fitted": int(ok.sum()), "pixels_nan": int((~ok).sum()),
            "marked_nan": int((status == 2).sum()), "data_s": t_data, "compile_s": compile_s,
            "fit_batch_s": t_batch, "fit_cube_s": t_cube, "ratio": t_cube / t_batch,
@@ -126,6 +133,9 @@ def main(argv=None) -> dict:
           f"| {ny}×{nx}×{WL.size} | {res['pixels_fitted']} | {t_batch:.1f} | {t_cube:.1f} | {res['ratio']:.2f} | "
           f"{res['fit_cube_pixels_per_s']:.1f} | {agree:.1e} | {res['peak_rss_bytes'] / 2**20:.0f} | "
           f"{load0[0]:.1f}–{load1[0]:.1f} |\n")
+    md += (f"\nfit_cube regions: {res['regions'][0]} × {res['regions'][1]} pixels ("
+           + ("given" if a.region != "auto" else f"chunk='auto': {res['region_sizing'].get('budget_source', '')}")
+           + f"), {a.chunk_size} fits per solver call.\n")
     if res["workers"]:
         one = next((w for w in res["workers"] if w["n_workers"] == 1), None)
         md += ("\nThe same fit_cube on a LocalCluster of single-threaded worker processes "
@@ -160,7 +170,7 @@ def _on_cluster(n_workers: int, memory_limit: str, obj, lazy, work: Path, a, ref
                       dashboard_address=None) as cluster, Client(cluster) as client:
         load0 = os.getloadavg()
         t0 = time.perf_counter()
-        maps = fit_cube(obj, lazy, out=out, chunk=tuple(a.chunk), chunk_size=a.chunk_size, client=client,
+        maps = fit_cube(obj, lazy, out=out, chunk=a.region, chunk_size=a.chunk_size, client=client,
                         resume=False, progress=False).load()
         seconds = time.perf_counter() - t0
         load1 = os.getloadavg()

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import Coefficients, TableColumn
-from ._materials import Material, Tabulated, _complex
+from ._materials import Material, Tabulated, _complex, interpolate_table
 from ._validate import LayerstackError, check_nonnegative, check_wavelength_range, is_concrete
 
 __all__ = ["material", "material_sources", "DatabaseFormula", "database_version"]
@@ -305,7 +305,7 @@ class DatabaseFormula(Material):
         n = _formula_n(self.kind, self.coefficients, x * 1e-3)
         if self.k is None:
             return _complex(n, 0.0)
-        k = jnp.interp(x, jnp.asarray(self.k_wavelength_nm), jnp.asarray(self.k))
+        k = interpolate_table(x, self.k_wavelength_nm, self.k)
         return _complex(n, k)
 
 

@@ -113,6 +113,25 @@ class Sellmeier(Material):
         return _complex(jnp.sqrt(n2), self.k)
 
 
+def interpolate_table(x, table_nm, values):
+    """``values`` (on the increasing ``table_nm``) linearly interpolated at wavelengths ``x``
+    (nm; inside the table, see :func:`~layerstack_jax._validate.check_wavelength_range`).
+
+    With concrete ``x`` — a model's wavelength grid, fixed while a fit or a design varies
+    thicknesses and coefficients — each ``x``'s interval and weight are found now, in numpy, and
+    a compiled model holds them as data: the result is a numpy constant when ``values`` are
+    concrete too, else a gather and a weighted sum of the traced values (differentiable in
+    them). Traced ``x`` take ``jnp.interp`` (a search at run time)."""
+    table = np.asarray(table_nm, dtype=float)
+    if not is_concrete(x):
+        return jnp.interp(x, table, jnp.asarray(values))
+    x = np.asarray(x)
+    i = np.clip(np.searchsorted(table, x, side="right") - 1, 0, table.size - 2)
+    w = np.clip((x - table[i]) / (table[i + 1] - table[i]), 0.0, 1.0)
+    v = np.asarray(values) if is_concrete(values) else jnp.asarray(values)
+    return v[i] * (1.0 - w) + v[i + 1] * w
+
+
 class Tabulated(Material):
     """Tabulated (n, k) linearly interpolated on wavelength (differentiable in the table values).
 
@@ -151,8 +170,8 @@ class Tabulated(Material):
     def __call__(self, wavelength_nm):
         table = np.asarray(self.wavelength_nm)
         x = check_wavelength_range(self.name, wavelength_nm, float(table[0]), float(table[-1]))
-        n = jnp.interp(x, table, jnp.asarray(self.n))
-        k = 0.0 if self.k is None else jnp.interp(x, table, jnp.asarray(self.k))
+        n = interpolate_table(x, table, self.n)
+        k = 0.0 if self.k is None else interpolate_table(x, table, self.k)
         return _complex(n, k)
 
 

@@ -208,7 +208,7 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
     if wl.ndim != 1:
         raise LayerstackError(f"wavelength_nm must be 1-D, got shape {wl.shape}")
     checks = PendingChecks()  # traced checks: one runtime branch for the whole stack
-    wl = jnp.asarray(check_positive("wavelength_nm (nm)", wl, pending=checks, key=("wl",)))
+    wl = check_positive("wavelength_nm (nm)", wl, pending=checks, key=("wl",))
     names = ("ambient index", *(f"layers[{i}] ({layer.name or 'unnamed'}): index" for i, layer in enumerate(stack.layers)),
              "exit index")
     n = [
@@ -241,6 +241,7 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
             d[key[1]] = value
         else:
             alpha[key[1]] = value
+    wl = jnp.asarray(wl)
     return ResolvedStack(
         n=tuple(n),
         d=tuple(d),

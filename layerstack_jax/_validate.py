@@ -136,7 +136,8 @@ def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingCh
 
 def check_wavelength_range(name: str, x, lo: float, hi: float):
     """Wavelengths ``x`` (nm) inside a material table's range ``[lo, hi]`` (tolerance 1e-9 nm):
-    ``x`` as a JAX array; a :class:`LayerstackError` naming the material (``name``), the range
+    ``x`` itself, a numpy array when concrete (so that a table's interpolation can be set up at
+    trace time) and a JAX array when traced; a :class:`LayerstackError` naming the material (``name``), the range
     asked for and the data range — at once on concrete wavelengths, at run time
     (``equinox.error_if``) on traced ones, not at all inside :func:`traced_checks_off` (the fitting
     objective checks its grid against every table when it is built)."""
@@ -145,7 +146,7 @@ def check_wavelength_range(name: str, x, lo: float, hi: float):
         if np.any(w < lo - 1e-9) or np.any(w > hi + 1e-9):
             raise LayerstackError(f"{name}: wavelengths {w.min():g}–{w.max():g} nm outside the data range "
                                   f"{lo:g}–{hi:g} nm")
-        return jnp.asarray(x)
+        return w
     x = jnp.asarray(x)
     if not _TRACED_CHECKS.get():
         return x

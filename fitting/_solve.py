@@ -38,7 +38,9 @@ reason in the library's words.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import os
 from typing import Callable, NamedTuple, Optional
 
 import jax
@@ -498,6 +500,49 @@ def _statistics_function(objective: Objective):
     return stats
 
 
+#: XLA options of the compiled programs of a single fit on the CPU (:func:`fit_jit`): XLA's
+#: classic fusion emitters rather than its MLIR ones. A fit of one measurement spends most of
+#: its time compiling (E1, issue 15: 3-angle × 700-λ ψ/Δ, Cauchy film on SiO2/Si — XLA 1.9–2.0 s
+#: → 1.0–1.2 s for the solver's program, the further fits 12–15 ms either way, 2026-11-28);
+#: batched fits (``fit_batch``, ``fit_cube``: run time dominates) keep XLA's defaults.
+SINGLE_FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+@functools.cache
+def _compiler_options(backend: str) -> Optional[dict]:
+    """:data:`SINGLE_FIT_COMPILER_OPTIONS` where they apply: on the CPU backend, when this XLA
+    knows them (probed once on a trivial program: an XLA without the option refuses it) and the
+    user has not set one of them in ``XLA_FLAGS`` (theirs win); else None (XLA's defaults)."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if backend != "cpu" or any(name in flags for name in SINGLE_FIT_COMPILER_OPTIONS):
+        return None
+    try:
+        jax.jit(lambda v: v + 1, compiler_options=SINGLE_FIT_COMPILER_OPTIONS).lower(1.0).compile()
+    except Exception:  # noqa: BLE001 — an XLA without the option: its defaults
+        return None
+    return dict(SINGLE_FIT_COMPILER_OPTIONS)
+
+
+class fit_jit:
+    """``jax.jit(fn)`` for a single fit's programs: called from Python (not under a JAX
+    transformation) it compiles with :data:`SINGLE_FIT_COMPILER_OPTIONS` on the CPU
+    (:func:`_compiler_options`), and its attributes (``lower``, ``_cache_size`` …) are that
+    function's; traced inside another function, where JAX takes compiler options only from the
+    outermost ``jit``, it is the plain ``jax.jit(fn)``."""
+
+    def __init__(self, fn: Callable):
+        self.jitted = jax.jit(fn)
+        options = _compiler_options(jax.default_backend())
+        self.top = self.jitted if options is None else jax.jit(fn, compiler_options=options)
+
+    def __call__(self, *args):
+        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
+        return (self.jitted if traced else self.top)(*args)
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["top"], name)
+
+
 #: Fits per vmapped block inside a batched solve (``jax.lax.map``): small blocks keep the
 #: working set in cache and let each block stop as soon as its own fits have converged.
 BLOCK = 4
@@ -546,7 +591,7 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
 
             cache[key] = _with_give_up(jax.jit(run_all))
         else:
-            cache[key] = _with_give_up(jax.jit(run))
+            cache[key] = _with_give_up(fit_jit(run))
     return cache[key]
 
 
@@ -589,9 +634,10 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         with traced_checks_off():
             return _statistics_function(objective)(x, args, optics)
 
-    res_fn = jax.jit(residuals)
-    jac_fn = jax.jit(jax.jacfwd(residuals))
-    stats = jax.jit(statistics)
+    jit = jax.jit if batched else fit_jit
+    res_fn = jit(residuals)
+    jac_fn = jit(jax.jacfwd(residuals))
+    stats = jit(statistics)
 
     def one(z0, args, optics, give_up=None):  # no give-up rule on the host
         z0 = np.clip(np.asarray(z0, dtype=float), lower, upper)

@@ -45,13 +45,17 @@ def _data(seed):
     return [a[None] for i in range(len(ANGLES)) for a in (psi[i], delta[i])]
 
 
-@pytest.fixture(scope="module")
-def objective():
+def _objective():
     data = _data(0)
     datasets = [ft.Dataset(ls.Ellipsometric(a, q), data[2 * i + k], sigma=SIGMA)
                 for i, a in enumerate(ANGLES) for k, q in enumerate(("psi", "delta"))]
     params = [ft.thickness("film", lower=20.0, upper=300.0), ft.dispersion("film", "A"), ft.dispersion("film", "B")]
     return ft.Objective(_stack(100.0, 1.50, 0.005), WL, datasets, params)
+
+
+@pytest.fixture(scope="module")
+def objective():
+    return _objective()
 
 
 def test_shared_ellipsometer_reading_equals_each_geometry():
@@ -184,3 +188,30 @@ def test_compiling_a_fit_traces_the_model_once(method, monkeypatch):
     batch = ft.fit_batch(obj, np.concatenate([data[0], _data(1)[0]]), method=method, progress=False)
     assert np.all(np.asarray(batch.converged))
     assert len(calls) == 1, len(calls)
+
+
+def test_single_fit_compiler_options(objective, monkeypatch):
+    """A single fit's programs are compiled on the CPU with
+    :data:`fitting._solve.SINGLE_FIT_COMPILER_OPTIONS` (XLA's classic fusion emitters: about
+    half the compile time of a fit): known to this XLA, and the fit is the one XLA's default
+    options give (same steps, values to rounding). An option the XLA does not know, a GPU
+    backend, or the same option in the user's ``XLA_FLAGS`` leave XLA's defaults."""
+    probe = _solve._compiler_options
+    probe.cache_clear()
+    assert probe("cpu") == _solve.SINGLE_FIT_COMPILER_OPTIONS
+    assert probe("gpu") is None
+    with_options = ft.fit(objective)
+    monkeypatch.setattr(_solve, "_compiler_options", lambda backend: None)
+    default = ft.fit(_objective())
+    assert int(with_options.num_steps) == int(default.num_steps) and with_options.converged and default.converged
+    np.testing.assert_allclose(np.asarray(with_options.x), np.asarray(default.x), rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(with_options.x_stderr), np.asarray(default.x_stderr), rtol=1e-8)
+    monkeypatch.setattr(_solve, "_compiler_options", probe)
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
+    probe.cache_clear()
+    assert probe("cpu") is None
+    monkeypatch.delenv("XLA_FLAGS")
+    monkeypatch.setattr(_solve, "SINGLE_FIT_COMPILER_OPTIONS", {"xla_cpu_no_such_option_here": False})
+    probe.cache_clear()
+    assert probe("cpu") is None
+    probe.cache_clear()

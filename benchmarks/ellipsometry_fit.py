@@ -6,10 +6,9 @@ The problem (issue 15's performance target): air / Cauchy film (d = 120 nm, A = 
 B = 0.0080 µm²) / native SiO2 (2.0 nm, Malitson) / Si (Aspnes), ψ and Δ at 55°, 65° and 75°
 on ``--wavelengths`` points evenly spaced in 300–820 nm (inside both tables). Free: the film's
 thickness (bounds 20–300 nm) and Cauchy A, B (start 100 nm, 1.50, 0.0050 µm²; A ≥ 1, the
-library's default bound of an index, B unbounded — with B bounded to [0, 0.05] and A to
-[1.2, 2.2], Levenberg–Marquardt reaches a bound on the way from this start, is restarted there
-and stops at ``max_steps`` on the right values but "not converged", a library issue noted in
-``benchmarks/README.md``). The data are made by **pyElli**
+library's default bound of an index, B unbounded, as in the first runs — with B bounded to
+[0, 0.05] and A to [1.2, 2.2] the fit takes 55 steps on 40 wavelengths, ``benchmarks/README.md``).
+The data are made by **pyElli**
 (``elli.Structure.evaluate``, 2×2 solver; the SiO2 and Si constants handed to it as tables on
 the same wavelengths, exact at the nodes) — not by the code under test — plus Gaussian noise
 σψ = σΔ = 0.02°; every repeat draws new noise.
@@ -405,14 +404,30 @@ WHERE_THE_TIME_GOES = [
     "CPU; further fit 50 → 26–35 ms CPU; 16 starts 23.3 s (first call, 12 compilations) → 0.9 s (none) and "
     "12.0 → 1.6 s (second call).",
     "",
-    "What is left of the first fit (2026-11-27, idle: ~3.2 s): tracing ~0.9 s and XLA ~2.2 s for one program. "
-    "At load ~3, compiled alone: the model's residuals 1.0 s of XLA, its forward-mode Jacobian (3 tangents through "
-    "the coherent kernel's closed-form derivative) 3.2 s, the whole fit 4.8 s — the Jacobian is two thirds of it. "
-    "Since the table materials' range checks are off inside the solver (the objective checks its grid once), the "
-    "program holds no host callback and JAX's persistent compilation cache keeps it: the command line turns that "
-    "cache on, so a later `layerstack fit` of the same model structure loads the compiled fit (first fit 1.4 s). "
-    "No XLA CPU option tried (codegen split, LLVM passes, optimisation level) compiles the program faster without a "
-    "slower solve.",
+    "2026-11-28, the first fit from ~3.3 s to ~2 s (same machine; before/after in fresh processes, alternating, "
+    "load ~1, each the median of 3 fits of new objectives in one process): the first fit 2.81–3.07 → 1.84–1.88 s "
+    "wall, the XLA compile of the fit's program 1.96–2.14 → 0.99–1.04 s, further fits 13–14 ms either way. Two "
+    "changes:",
+    "",
+    "- a single fit's programs are compiled with XLA's classic CPU fusion emitters "
+    "(`fitting._solve.SINGLE_FIT_COMPILER_OPTIONS`, `xla_cpu_use_fusion_emitters = false`, passed as JAX's "
+    "`compiler_options` of that program only): XLA's newer MLIR emitters compiled each of the program's ~135 "
+    "kernels through their own pipeline; the classic ones halve the XLA time and the solve runs as fast. Batched "
+    "fits (`fit_batch`, `fit_cube`: run time dominates) keep XLA's defaults (F1: 157/149 vs 162/159 fits/s with "
+    "and without the option). An XLA without the option, another backend, or the option in the user's "
+    "`XLA_FLAGS` leave XLA's defaults.",
+    "- material tables are interpolated in numpy on the model's (concrete) wavelength grid "
+    "(`layerstack_jax._materials.interpolate_table`): Si's table search (`jnp.interp`, two `searchsorted` loops) "
+    "was compiled into the program and run at every solver step, because the grid reached the tables as a traced "
+    "constant. The model's Jacobian compiled alone: 1.89–2.21 → 1.39–1.89 s CPU.",
+    "",
+    "Earlier (2026-11-27, idle: ~3.2 s): tracing ~0.9 s and XLA ~2.2 s for one program; at load ~3, compiled "
+    "alone, the model's residuals 1.0 s of XLA, its forward-mode Jacobian 3.2 s, the whole fit 4.8 s. Since the "
+    "table materials' range checks are off inside the solver (the objective checks its grid once), the program "
+    "holds no host callback and JAX's persistent compilation cache keeps it: the command line turns that cache "
+    "on, so a later `layerstack fit` of the same model structure loads the compiled fit. Other XLA CPU options "
+    "tried (codegen split count, LLVM expensive passes off, backend optimisation level 1, the thunk runtime off) "
+    "gave no reliable gain.",
 ]
 
 

@@ -32,8 +32,8 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import (BY_LBFGSB, HOST_METHODS, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
-                     settle_on_bounds, starting_point)
+from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
+                     require_compiled_method, settle_on_bounds, starting_point)
 from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
 from ._status import CONVERGED, INVALID_DATA, result_message
 
@@ -257,11 +257,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
 
     start_time = time.perf_counter()
     o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
-    if method in HOST_METHODS:
-        raise LayerstackError(
-            f"fit_batch: method {method!r} runs on the host one fit at a time; batched fits need a compiled "
-            "solver: 'lm', 'gauss-newton', 'dogleg', 'bfgs' or 'lbfgsb'"
-        )
+    require_compiled_method("fit_batch", method)
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     if objective.n_parameters == 0:

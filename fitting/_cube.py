@@ -76,6 +76,7 @@ from layerstack_jax._progress import reporter
 from ._batch import fit_batch
 from ._objective import Objective
 from ._results import linearised_covariance
+from ._solve import require_compiled_method
 
 __all__ = ["fit_cube", "CUBE_STATUS", "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
            "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER"]
@@ -150,11 +151,8 @@ def _solver_memory(objective: Objective, method: str, chunk_size: int, bands: in
     one ``fit_batch`` then reuses in this process."""
     import inspect
 
-    from ._solve import HOST_METHODS, NEVER, SolverOptions, compiled_fit, starting_point
+    from ._solve import NEVER, SolverOptions, compiled_fit, starting_point
 
-    if method in HOST_METHODS:
-        raise LayerstackError(f"fit_cube: method {method!r} runs on the host one fit at a time; a cube needs a "
-                              "compiled solver: 'lm', 'gauss-newton', 'dogleg', 'bfgs' or 'lbfgsb'")
     opts = {k: p.default for k, p in inspect.signature(fit_batch).parameters.items()
             if k in ("rtol", "atol", "gtol", "max_steps", "sigma_tol")}
     opts.update((k, v) for k, v in fit_opts if k in opts)
@@ -505,6 +503,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             raise LayerstackError(f"fit_cube: chunk must be (rows, columns) >= 1 or 'auto', got {chunk!r}")
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"fit_cube: chunk_size must be an integer >= 1, got {chunk_size!r}")
+    require_compiled_method("fit_cube", method)
     if memory is not None and not (isinstance(memory, (int, np.integer)) and memory >= 1):
         raise LayerstackError(f"fit_cube: memory must be a number of bytes >= 1, got {memory!r}")
     if mask is not None:

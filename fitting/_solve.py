@@ -500,6 +500,15 @@ def _statistics_function(objective: Objective):
     return stats
 
 
+def require_compiled_method(caller: str, method: str) -> None:
+    """Refuse a host method (:data:`HOST_METHODS`: one fit at a time on the host) where
+    ``caller`` needs a compiled, batched solver; the message names the methods that are."""
+    if method in HOST_METHODS:
+        compiled = ", ".join(repr(m) for m in METHODS if m not in HOST_METHODS)
+        raise LayerstackError(f"{caller}: method {method!r} runs on the host one fit at a time; batched fits need a "
+                              f"compiled solver: {compiled}")
+
+
 #: XLA options of the compiled programs of a single fit on the CPU (:func:`fit_jit`): XLA's
 #: classic fusion emitters rather than its MLIR ones. A fit of one measurement spends most of
 #: its time compiling (E1, issue 15: 3-angle × 700-λ ψ/Δ, Cauchy film on SiO2/Si — XLA 1.9–2.0 s

@@ -146,6 +146,13 @@ def test_tiny_budget_names_the_chunk(sizes, tmp_path):
     assert not (tmp_path / "m.zarr").exists()
 
 
+def test_auto_regions_of_a_host_method_are_refused_before_anything_is_written(tmp_path):
+    with pytest.raises(ls.LayerstackError, match="fit_cube: method 'trf' runs on the host one fit at a time"):
+        fit_cube(OBJECTIVE, CUBE, wavelength_nm=WL, out=tmp_path / "m.zarr", chunk_size=CHUNK_SIZE, progress=False,
+                 method="trf")
+    assert not (tmp_path / "m.zarr").exists()
+
+
 def test_fit_cube_auto_equals_explicit_sizes_and_resumes_with_the_stored_ones(sizes, tmp_path, caplog):
     caplog.set_level(logging.INFO, logger="fitting.cube")
     auto = fit_cube(OBJECTIVE, CUBE, wavelength_nm=WL, out=tmp_path / "auto.zarr", chunk_size=CHUNK_SIZE,

@@ -251,8 +251,9 @@ def test_resample_matches_numpy_interp_and_never_extrapolates():
 
 def test_trf_is_refused_by_fit_batch(incoherent):
     obj, truth = incoherent
-    with pytest.raises(ls.LayerstackError, match="host"):
+    with pytest.raises(ls.LayerstackError, match="fit_batch: method 'trf' runs on the host") as e:
         ft.fit_batch(obj, np.stack([truth, truth]), method="trf")
+    assert all(repr(m) in str(e.value) for m in ("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb"))
 
 
 # ----------------------------------------------------------------- mixed stacks

@@ -341,3 +341,69 @@ def test_measured_si3n4_on_bf33_wafer_fits_better_with_its_backside():
     assert all(700.0 < v < 900.0 for v in d.values()), d
     back = float(np.squeeze(results["coated"].values["thickness[back]"]))
     assert abs(back - d["coated"]) < 0.05 * d["coated"], (back, d["coated"])
+
+
+# ----------------------------------------------------------------- the measured glass plate
+def test_measured_bare_glass_fits_with_its_backside_and_matches_the_beam_sum():
+    """Acceptance (issue 15), on a measured file: bare glass measured in reflection with its
+    backside open — Woollam M-2000, WVASE export, 7 angles 50–80°
+    (examples/data/woollam_wvase_plasma_treated_glass.dat, provenance in examples/data/README.md;
+    the glass type and thickness are not documented). Cauchy glass fitted to ψ/Δ (σ from the
+    file) on 400–1000 nm:
+
+    * with the incoherent backside (a 1 mm plate in air: lossless, so its thickness does not
+      matter): ψ within 0.07° rms, n(633 nm) = 1.516 — soda-lime glass;
+    * without it (a semi-infinite substrate): ψ misses by 1.7° rms and χ² is 576× larger, the
+      index pushed down to 1.44 to make up for the missing back reflection;
+    * the fitted backside model equals the explicit incoherent sum of the reflected beams
+      (numpy, above) at the fitted index, and its depolarization lies in [0, 1], rises with the
+      angle from 60° to 80° as the file's dPolE rows do, and stays below them (the file's
+      depolarization exceeds it by 1.2–2.4 %: the instrument's own depolarization, not modelled).
+
+    Observed 2026-11-28: χ² 1.22e4 vs 7.0e6 (1316 points), A = 1.5030, B = 0.00511 µm²."""
+    import fitting as ft
+    from layerstack_jax import io
+
+    m = io.read_measurement("examples/data/woollam_wvase_plasma_treated_glass.dat")
+    band = (np.asarray(m.wavelength_nm) >= 400.0) & (np.asarray(m.wavelength_nm) <= 1000.0)
+    wl, angles = np.asarray(m.wavelength_nm)[band], np.asarray(m.angles_deg)
+    values, sigma = np.asarray(m.values)[..., band], np.asarray(m.sigma)[..., band]
+
+    def stack(backside, A, B):
+        glass = ls.Cauchy(A, B)
+        if backside:
+            return ls.Stack(1.0, [ls.Layer(glass, 1.0e6, coherent=False, name="glass")], ls.Substrate(1.0))
+        return ls.Stack(1.0, [], ls.Substrate(glass))
+
+    datasets = [ft.Dataset(ls.Ellipsometric(jnp.asarray(angles), q), values[:, k], sigma=sigma[:, k])
+                for k, q in enumerate(("psi", "delta"))]
+    fits = {}
+    for backside in (True, False):
+        where = "glass" if backside else "exit"
+        params = [ft.dispersion(where, "A", lower=1.3, upper=1.8), ft.dispersion(where, "B", lower=-0.05, upper=0.1)]
+        fits[backside] = ft.fit(ft.Objective(stack(backside, 1.5, 0.004), wl, datasets, params))
+    assert fits[True].converged, fits[True].report()
+    A, B = (float(np.squeeze(v)) for v in fits[True].values.values())
+    assert 1.50 < A + B / 0.633**2 < 1.53  # soda-lime / crown glass
+    assert fits[True].chi2 < fits[False].chi2 / 100
+
+    reading = _read(ls.Ellipsometric(jnp.asarray(angles), "psi"), stack(True, A, B), wl)
+    for backside, bound in ((True, 0.1), (False, 1.0)):
+        model = _read(ls.Ellipsometric(jnp.asarray(angles), "psi"),
+                      stack(backside, *(float(np.squeeze(v)) for v in fits[backside].values.values())), wl)
+        rms = float(np.sqrt(np.mean((np.asarray(model.psi_deg) - values[:, 0]) ** 2)))
+        assert (rms < bound) if backside else (rms > bound), (backside, rms)
+
+    n_glass = A + B / (wl * 1e-3) ** 2
+    beams = reading_of(explicit_sum(1.0, [], (n_glass, 1.0e6, 0.0), [], 1.0, angles, wl))
+    for key in ("psi_deg", "delta_deg", "depolarization"):
+        np.testing.assert_allclose(np.asarray(getattr(reading, key)), beams[key], rtol=0, atol=1e-10)
+
+    depol = np.asarray(reading.depolarization)
+    assert np.all((depol >= 0) & (depol <= 1))
+    rows = np.asarray(m.extras["dPolE"])  # (wavelength nm, angle, depolarization %, σ)
+    measured = np.array([np.interp(wl, r[:, 0], r[:, 2]) / 100 for r in (rows[np.isclose(rows[:, 1], a)] for a in angles)])
+    median_model, median_measured = np.median(depol, axis=1), np.median(measured, axis=1)
+    late = angles >= 59.0
+    assert np.all(np.diff(median_model[late]) > 0) and np.all(np.diff(median_measured[late]) > 0)
+    assert np.all(median_model < median_measured) and np.all(median_measured - median_model < 0.03)

@@ -11,6 +11,8 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
+from ._batched import MemoryBudget as MemoryBudget
+from ._batched import memory_budget as memory_budget
 from ._batched import predict as predict
 from ._coated_rough import CoatedRough as CoatedRough
 from ._coated_rough import coated_rough as coated_rough
@@ -168,6 +170,8 @@ __all__ = [
     "material",
     "material_sources",
     "Measurement",
+    "MemoryBudget",
+    "memory_budget",
     "microfacet_distribution",
     "mueller_from_jones",
     "normal_wavevector",

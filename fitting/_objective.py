@@ -73,6 +73,25 @@ def _shared_ellipsometer(g: Geometry, stack: Stack, colour) -> Optional[float]:
     return None if colour is not None else g.ellipsometry_angle(stack)
 
 
+def _reading_groups(geometries: list, coated: list, ellipsometry_angle: dict, datasets) -> dict:
+    """The ellipsometer readings of several datasets that one :meth:`reading` over their angles
+    serves (:meth:`~layerstack_jax.Geometry.reading_group`: same instrument, one concrete angle
+    each; not already read through :func:`~layerstack_jax.ellipsometry`, not CIELAB), in groups
+    of two or more: ``{"member": {dataset: (key, angle)}, "angles": {key: (first dataset,
+    sorted angles)}}``. A thick substrate measured at seven angles in ψ and Δ is then one reading
+    of the stack, not fourteen (one copy of the model in a compiled fit)."""
+    found = {i: geometries[i].reading_group() for i in coated
+             if ellipsometry_angle[i] is None and datasets[i].colour is None}
+    found = {i: kg for i, kg in found.items() if kg is not None}
+    keys = [kg[0] for kg in found.values()]
+    member = {i: kg for i, kg in found.items() if keys.count(kg[0]) >= 2}
+    angles = {}
+    for i, (key, _) in member.items():
+        if key not in angles:
+            angles[key] = (i, sorted({a for k, a in member.values() if k == key}))
+    return {"member": member, "angles": angles}
+
+
 def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
     """True if a free leaf at ``path`` leaves the :class:`layerstack_jax.Optics` unchanged: the
     thickness or α of a thick (incoherent) layer, or the background's ρg."""
@@ -530,15 +549,25 @@ class Objective:
         angles = sorted({a for a in angle.values() if a is not None})
         if sum(a is not None for a in angle.values()) < 2:
             angles = []  # nothing to share: the dataset's own reading, as below
+        # other single-angle ellipsometer readings (thick substrates, transmission, non-ideal
+        # instruments): one reading() over the angles of each group of the same instrument
+        group = _reading_groups(geometries, coated, angle, self.datasets)
 
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
             e = ellipsometry(st, grid, np.asarray(angles)) if angles else None
-            return tuple(geometries[i].from_ellipsometry(e)[angles.index(angle[i])]
-                         if angles and angle[i] is not None
-                         else _measure(st, grid, geometries[i], nodes, optics[i], self.datasets[i].colour)
-                         for i in coated)
+            readings = {key: geometries[first].at_angles(a).reading(st, grid) for key, (first, a) in group["angles"].items()}
+
+            def read(i):
+                if angles and angle[i] is not None:
+                    return geometries[i].from_ellipsometry(e)[angles.index(angle[i])]
+                if i in group["member"]:
+                    key, a = group["member"][i]
+                    return geometries[i].from_reading(readings[key])[group["angles"][key][1].index(a)]
+                return _measure(st, grid, geometries[i], nodes, optics[i], self.datasets[i].colour)
+
+            return tuple(read(i) for i in coated)
 
         if any(per):
             out = jax.vmap(one)(own)

@@ -620,6 +620,12 @@ class Ellipsometric(Geometry):
         """True when every non-ideality is concretely 0: the reading is :func:`ellipsometry`'s."""
         return all(self._is_zero(n) for n in ("angle_offset_deg", "bandwidth_nm", "thickness_spread"))
 
+    def depolarizes(self, stack: Stack) -> bool:
+        """True when the reading of ``stack`` is (in general) partly depolarized — thick
+        incoherent layers, a bandwidth or a thickness spread (module docstring): its N, C, S
+        are then shorter than 1, and ψ, Δ are reported from them (:func:`reading_from_ncs`)."""
+        return not is_coherent(stack) or not (self._is_zero("bandwidth_nm") and self._is_zero("thickness_spread"))
+
     def ellipsometry_angle(self, stack: Stack) -> Optional[float]:
         """The angle (degrees) when this reading is :func:`ellipsometry`'s: the ideal instrument,
         in reflection, on a coherent stack, at one concrete angle (:meth:`Geometry.ellipsometry_angle`);
@@ -639,6 +645,36 @@ class Ellipsometric(Geometry):
         if self.quantity == "depolarization":
             return jnp.zeros_like(e.psi_deg)
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
+
+    def reading_group(self) -> Optional[tuple]:
+        """``(key, angle)`` (:meth:`Geometry.reading_group`): the key holds every setting but the
+        angle and the quantity — mode, averaging, the non-uniform layer and the non-idealities
+        (their values when concrete scalars, else the leaf itself by identity: one fitted offset
+        shared by several datasets groups them, two separate ones do not); None for an angle
+        that is traced or not a scalar."""
+        a = self.angle_deg
+        if not is_concrete(a) or np.ndim(a) != 0:
+            return None
+
+        def setting(x):
+            return float(np.asarray(x)) if is_concrete(x) and np.ndim(x) == 0 else ("leaf", id(x))
+
+        key = (type(self), self.mode, self.nonuniform_layer, self.average_nodes,
+               *(setting(x) for x in (self.angle_offset_deg, self.bandwidth_nm, self.thickness_spread)))
+        return key, float(np.asarray(a))
+
+    def at_angles(self, angles_deg) -> "Ellipsometric":
+        """The same instrument at the angles ``angles_deg`` (degrees, ``(angle,)``), quantity
+        unchanged (:meth:`reading_group`)."""
+        return eqx.tree_at(lambda g: g.angle_deg, self, np.asarray(angles_deg, dtype=float))
+
+    def from_reading(self, e: EllipsometerReading):
+        """The quantity read, from a :meth:`reading` ``e`` (every field ``(*angle, wl)``)."""
+        if self.quantity in ("rho_re", "rho_im"):
+            t, d = jnp.tan(jnp.deg2rad(e.psi_deg)), jnp.deg2rad(e.delta_deg)
+            return t * jnp.cos(d) if self.quantity == "rho_re" else -t * jnp.sin(d)
+        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S,
+                "depolarization": e.depolarization}[self.quantity]
 
     def _coherent_ellipsometry(self, stack: Stack, wavelength_nm, angle) -> Ellipsometry:
         """The ideal reading of a coherent stack from its amplitudes: :func:`ellipsometry`, or the
@@ -672,12 +708,7 @@ class Ellipsometric(Geometry):
         are not used (an ellipsometer reads amplitudes, not the cached intensities)."""
         if self.ideal and is_coherent(stack):  # the amplitudes' ratio itself (reflection or transmission)
             return self.from_ellipsometry(self._coherent_ellipsometry(stack, wavelength_nm, self.angle_deg))
-        e = self.reading(stack, wavelength_nm)
-        if self.quantity in ("rho_re", "rho_im"):
-            t, d = jnp.tan(jnp.deg2rad(e.psi_deg)), jnp.deg2rad(e.delta_deg)
-            return t * jnp.cos(d) if self.quantity == "rho_re" else -t * jnp.sin(d)
-        return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S,
-                "depolarization": e.depolarization}[self.quantity]
+        return self.from_reading(self.reading(stack, wavelength_nm))
 
     def wavelengths_read(self, wavelength_nm) -> np.ndarray:
         """The grid, widened by the outermost wavelength nodes of the bandwidth average

@@ -215,3 +215,28 @@ def test_single_fit_compiler_options(objective, monkeypatch):
     probe.cache_clear()
     assert probe("cpu") is None
     probe.cache_clear()
+
+
+def test_readings_of_one_instrument_at_several_angles_share_one_reading(monkeypatch):
+    """Ellipsometer readings that are not ``ellipsometry()``'s — a thick substrate with its
+    backside, an instrument with a bandwidth — are read with one ``reading()`` over the angles of
+    each instrument (``fitting._objective._reading_groups``), not one per dataset: the same
+    values as each dataset's own ``measure`` (to 1e-12), three readings instead of fifteen here.
+    A dataset whose instrument differs (an angle offset) keeps its own reading."""
+    wl = np.linspace(420.0, 780.0, 19)
+    stack = ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.9, 0.01), 150.0, name="film"),
+                           ls.Layer(1.515, 1.0e6, coherent=False, name="glass")], ls.Substrate(1.0))
+    geometries = [ls.Ellipsometric(a, q) for a in (50.0, 60.0, 70.0) for q in ("psi", "delta", "depolarization", "rho_re")]
+    geometries += [ls.Ellipsometric(a, "N", bandwidth_nm=5.0) for a in (55.0, 65.0)]
+    geometries += [ls.Ellipsometric(65.0, "C", angle_offset_deg=0.2)]
+    data = [np.zeros((1, wl.size)) for _ in geometries]
+    obj = ft.Objective(stack, wl, [ft.Dataset(g, y) for g, y in zip(geometries, data)], [ft.thickness("film")])
+    calls = []
+    reading = ls.Ellipsometric.reading
+    monkeypatch.setattr(ls.Ellipsometric, "reading", lambda self, *a, **k: calls.append(1) or reading(self, *a, **k))
+    predicted = jax.jit(lambda x: obj.predict(x, obj.optics))(jnp.asarray([150.0]))
+    assert len(calls) == 3, len(calls)
+    monkeypatch.setattr(ls.Ellipsometric, "reading", reading)
+    own = jax.jit(lambda st: [g.measure(st, wl) for g in geometries])(stack)  # each dataset's own reading
+    for p, q in zip(predicted, own):
+        np.testing.assert_allclose(np.asarray(p)[0], np.asarray(q), rtol=1e-12, atol=1e-13)

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, LayerstackError
+from layerstack_jax import DEFAULT_NODES, LayerstackError, LayerstackWarning
 from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
 
 from ._common import PROG, _positive_int, _precision, _resolve_geometry
@@ -51,7 +53,8 @@ def _add_fit_parser(sub) -> None:
     p.add_argument("--residuals", choices=RESIDUAL_KINDS, default=None, metavar="KIND",
                    help="for a psi/Delta instrument file: what is compared with the model: NCS (default; N = cos 2psi, "
                         "C = sin 2psi cos Delta, S = sin 2psi sin Delta), psi-delta (degrees; Delta residuals wrapped into "
-                        "(-180, 180]) or rho (Re and Im of rho = rp/rs = tan psi e^{-i Delta}); the file's sigma(psi), "
+                        "(-180, 180]; the default when the model's reading is depolarized: thick incoherent layers, a "
+                        "bandwidth or a thickness spread) or rho (Re and Im of rho = rp/rs = tan psi e^{-i Delta}); the file's sigma(psi), "
                         "sigma(Delta) are propagated to first order; --sigma is then in that kind's unit")
     p.add_argument("--report", choices=("summary", "all"), default="summary",
                    help="with several spectra: one summary table (default) or every fit's full report")
@@ -126,17 +129,39 @@ def _nsc(psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
     return values, tuple(np.maximum(s, floor) for s in sigmas)
 
 
-def _measurement_datasets(m, args) -> tuple[list, str, str]:
+def _default_residuals(m, args, stack, settings) -> Optional[str]:
+    """What a ψ/Δ file is compared in when ``--residuals`` is not given: N, C, S, unless the
+    model's reading is depolarized (thick incoherent layers, the ``[instrument]``'s bandwidth or
+    thickness spread: :meth:`~layerstack_jax.Ellipsometric.depolarizes`). N, C, S made from a
+    file's ψ, Δ have length 1, which a depolarized reading (length < 1, ψ and Δ reported from it)
+    cannot match — the fit would be biased (a bare glass plate with its backside: n(633 nm) 1.493
+    instead of 1.516); ψ and Δ are then compared as the instrument reports them. An explicit
+    ``--residuals NCS`` with such a model is warned about."""
+    from layerstack_jax import Ellipsometric
+
+    if m.quantity != "psi_delta":
+        return args.residuals
+    depolarized = instrument_geometry(Ellipsometric(float(np.asarray(m.angles_deg)[0]), "N"), settings).depolarizes(stack)
+    if depolarized and args.residuals == "NCS":
+        warnings.warn(f"{args.data}: the model's reading is depolarized (thick incoherent layers, a bandwidth or a "
+                      "thickness spread) while N, C, S made from the file's psi/Delta have length 1: the fit is "
+                      "biased; --residuals psi-delta compares psi and Delta as the instrument reports them",
+                      LayerstackWarning, stacklevel=2)
+    return args.residuals or ("psi-delta" if depolarized else "NCS")
+
+
+def _measurement_datasets(m, args, kind: Optional[str] = None) -> tuple[list, str, str]:
     """Datasets of an instrument file, one per angle and quantity, with the file's σ; the
-    geometry is the file's (ellipsometer or spectrophotometer at the file's angles)."""
+    geometry is the file's (ellipsometer or spectrophotometer at the file's angles); ``kind``:
+    how ψ/Δ are compared (:data:`RESIDUAL_KINDS`; default ``--residuals``, else N, C, S)."""
     import fitting
     from layerstack_jax import Ellipsometric, Specular
 
     name = Path(args.data).name
     valid = m.valid()
     datasets = []
-    kind = getattr(args, "residuals", None)
-    if kind is not None and m.quantity != "psi_delta":
+    kind = kind or getattr(args, "residuals", None)
+    if getattr(args, "residuals", None) is not None and m.quantity != "psi_delta":
         raise LayerstackError(f"{args.data}: --residuals chooses how psi/Delta are compared; this file holds "
                               f"{m.quantity}")
     if m.quantity == "psi_delta":
@@ -184,8 +209,8 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
         import fitting
 
         stack, params = fitting.load_fit_parameters(args.stack)
-        datasets, label, origin = _measurement_datasets(m, args)
         settings = load_instrument(args.stack)  # the stack file's [instrument]: offsets, bandwidth …
+        datasets, label, origin = _measurement_datasets(m, args, _default_residuals(m, args, stack, settings))
         datasets = [dataclasses.replace(d, geometry=instrument_geometry(d.geometry, settings)) for d in datasets]
         if args.wavelengths is not None:
             datasets = [fitting.Dataset(d.geometry, d.data, sigma=d.sigma, mask=d.mask, name=d.name,

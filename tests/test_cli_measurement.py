@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from layerstack_cli import main
+from layerstack_jax import LayerstackWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "examples" / "data"
@@ -75,3 +76,29 @@ def test_rho_sigma_is_the_first_order_propagation():
     dd = (rho(psi, delta + h) - rho(psi, delta - h)) / (2 * h) * sd
     np.testing.assert_allclose(s_re, np.hypot(dp.real, dd.real), rtol=1e-6)
     np.testing.assert_allclose(s_im, np.hypot(dp.imag, dd.imag), rtol=1e-6)
+
+
+def test_fit_measured_glass_plate_with_its_backside(tmp_path, capsys):
+    """A measured bare glass plate with its back face open (Woollam M-2000, 7 angles; provenance in
+    examples/data/README.md) fitted from the command line with examples/glass_plate_backside.toml
+    (the plate an incoherent layer between air and air, Cauchy A and B free): n(633 nm) of a
+    soda-lime glass, as the library fit of tests/test_ellipsometry_backside.py finds it (1.516)."""
+    out = tmp_path / "r.json"
+    code = main(["fit", str(ROOT / "examples" / "glass_plate_backside.toml"),
+                 str(DATA / "woollam_wvase_plasma_treated_glass.dat"), "-w", "400:1000:20", "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    # the model depolarizes: psi and Delta compared as reported, not N, C, S of length 1
+    assert "sigma: from the file" in text and "geometry: ellipsometry:50.0002,54.9999," in text
+    assert ":psi,delta (from the file" in text
+    p = json.loads(out.read_text())["fits"][0]["parameters"]
+    A, B = p["cauchy.A[glass]"]["value"], p["cauchy.B[glass]"]["value"]
+    assert 1.510 < A + B / 0.633**2 < 1.522, (A, B)
+    # asked for N, C, S anyway: warned, and biased (n(633 nm) 1.493)
+    with pytest.warns(LayerstackWarning, match="depolarized .* N, C, S made from the file's psi/Delta have length 1"):
+        code = main(["fit", str(ROOT / "examples" / "glass_plate_backside.toml"),
+                     str(DATA / "woollam_wvase_plasma_treated_glass.dat"), "-w", "400:1000:20", "--residuals", "NCS",
+                     "-o", str(out)])
+    assert code == 0
+    p = json.loads(out.read_text())["fits"][0]["parameters"]
+    assert p["cauchy.A[glass]"]["value"] + p["cauchy.B[glass]"]["value"] / 0.633**2 < 1.50

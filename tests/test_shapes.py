@@ -131,7 +131,7 @@ NOT_SPECTRA = {
     "write_zarr_cube": "cubes", "load_fit_stack": "files", "load_stack": "files", "parse_wavelengths": "files",
     "read_csv_columns": "files", "read_measurement": "files", "read_spectra_csv": "files",
     "save_spectra_csv": "files", "save_stack": "files", "stack_from_dict": "files", "stack_to_dict": "files",
-    "write_measurement_csv": "files",
+    "write_measurement_csv": "files", "memory_budget": "memory for chunk='auto' (test_auto_chunks)",
 }
 
 CASES = [(name, kind, angle) for name in (*ARRAY_RETURNING, *TUPLE_RETURNING)

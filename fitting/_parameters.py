@@ -807,7 +807,9 @@ class Layout:
         """The datasets' geometries with the :func:`instrument` parameters put in (one scalar
         each, ``equinox.tree_at``); geometries no parameter names are returned as they are."""
         out = list(geometries)
+        # one value per parameter, the same object in every geometry it enters: readings of one
+        # instrument at several angles then share one reading (Ellipsometric.reading_group)
+        value = {i: jnp.reshape(coefficients[i], ()) for i in set(self._instrument.values())}
         for (k, field), i in self._instrument.items():
-            value = jnp.reshape(coefficients[i], ())
-            out[k] = eqx.tree_at(lambda g: getattr(g, field), out[k], value)
+            out[k] = eqx.tree_at(lambda g: getattr(g, field), out[k], value[i])
         return tuple(out)

@@ -544,12 +544,16 @@ class fit_jit:
         options = _compiler_options(jax.default_backend())
         self.top = self.jitted if options is None else jax.jit(fn, compiler_options=options)
 
-    def __call__(self, *args):
-        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(args))
-        return (self.jitted if traced else self.top)(*args)
+    def __call__(self, *args, **kwargs):
+        traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((args, kwargs)))
+        return (self.jitted if traced else self.top)(*args, **kwargs)
 
     def __getattr__(self, name):
-        return getattr(self.__dict__["top"], name)
+        try:
+            top = object.__getattribute__(self, "top")
+        except AttributeError:  # not built yet (copy, pickle)
+            raise AttributeError(name) from None
+        return getattr(top, name)
 
 
 #: Fits per vmapped block inside a batched solve (``jax.lax.map``): small blocks keep the
@@ -643,10 +647,9 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         with traced_checks_off():
             return _statistics_function(objective)(x, args, optics)
 
-    jit = jax.jit if batched else fit_jit
-    res_fn = jit(residuals)
-    jac_fn = jit(jax.jacfwd(residuals))
-    stats = jit(statistics)
+    res_fn = fit_jit(residuals)  # one fit at a time on the host (multi-starts too): compile time dominates
+    jac_fn = fit_jit(jax.jacfwd(residuals))
+    stats = fit_jit(statistics)
 
     def one(z0, args, optics, give_up=None):  # no give-up rule on the host
         z0 = np.clip(np.asarray(z0, dtype=float), lower, upper)

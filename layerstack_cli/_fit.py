@@ -129,24 +129,30 @@ def _nsc(psi_deg, delta_deg, sigma_psi_deg=None, sigma_delta_deg=None):
     return values, tuple(np.maximum(s, floor) for s in sigmas)
 
 
-def _default_residuals(m, args, stack, settings) -> Optional[str]:
+def _default_residuals(m, args, stack, settings, params) -> Optional[str]:
     """What a ψ/Δ file is compared in when ``--residuals`` is not given: N, C, S, unless the
     model's reading is depolarized (thick incoherent layers, the ``[instrument]``'s bandwidth or
-    thickness spread: :meth:`~layerstack_jax.Ellipsometric.depolarizes`). N, C, S made from a
-    file's ψ, Δ have length 1, which a depolarized reading (length < 1, ψ and Δ reported from it)
-    cannot match — the fit would be biased (a bare glass plate with its backside: n(633 nm) 1.493
-    instead of 1.516); ψ and Δ are then compared as the instrument reports them. An explicit
-    ``--residuals NCS`` with such a model is warned about."""
+    thickness spread, set or free: :meth:`~layerstack_jax.Ellipsometric.depolarizes`). N, C, S
+    made from a file's ψ, Δ have length 1, which a depolarized reading (length < 1, ψ and Δ
+    reported from it) cannot match — the fit would be biased (a bare glass plate with its
+    backside: n(633 nm) 1.493 instead of 1.516); ψ and Δ are then compared as the instrument
+    reports them. An explicit ``--residuals NCS`` with such a model is warned about, and so is a
+    ``--sigma`` given without ``--residuals`` when the default is ψ/Δ (it is then in degrees)."""
     from layerstack_jax import Ellipsometric
 
     if m.quantity != "psi_delta":
         return args.residuals
-    depolarized = instrument_geometry(Ellipsometric(float(np.asarray(m.angles_deg)[0]), "N"), settings).depolarizes(stack)
+    free = {p.path[-1] for p in params if p.path[:1] == ("datasets",)}
+    depolarized = (bool(free & {"bandwidth_nm", "thickness_spread"})
+                   or instrument_geometry(Ellipsometric(float(np.asarray(m.angles_deg)[0]), "N"), settings).depolarizes(stack))
     if depolarized and args.residuals == "NCS":
         warnings.warn(f"{args.data}: the model's reading is depolarized (thick incoherent layers, a bandwidth or a "
                       "thickness spread) while N, C, S made from the file's psi/Delta have length 1: the fit is "
                       "biased; --residuals psi-delta compares psi and Delta as the instrument reports them",
                       LayerstackWarning, stacklevel=2)
+    if depolarized and args.residuals is None and args.sigma is not None:
+        warnings.warn(f"{args.data}: the model's reading is depolarized, so psi and Delta are compared (not N, C, S): "
+                      f"--sigma {args.sigma:g} is taken in degrees", LayerstackWarning, stacklevel=2)
     return args.residuals or ("psi-delta" if depolarized else "NCS")
 
 
@@ -210,7 +216,7 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
 
         stack, params = fitting.load_fit_parameters(args.stack)
         settings = load_instrument(args.stack)  # the stack file's [instrument]: offsets, bandwidth …
-        datasets, label, origin = _measurement_datasets(m, args, _default_residuals(m, args, stack, settings))
+        datasets, label, origin = _measurement_datasets(m, args, _default_residuals(m, args, stack, settings, params))
         datasets = [dataclasses.replace(d, geometry=instrument_geometry(d.geometry, settings)) for d in datasets]
         if args.wavelengths is not None:
             datasets = [fitting.Dataset(d.geometry, d.data, sigma=d.sigma, mask=d.mask, name=d.name,

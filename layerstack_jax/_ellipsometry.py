@@ -178,6 +178,7 @@ Spelled ``ellipsometry:ANGLE:QUANTITY:transmission`` on the command line and in 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import ClassVar, NamedTuple, Optional, Union
@@ -647,21 +648,26 @@ class Ellipsometric(Geometry):
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
 
     def reading_group(self) -> Optional[tuple]:
-        """``(key, angle)`` (:meth:`Geometry.reading_group`): the key holds every setting but the
-        angle and the quantity — mode, averaging, the non-uniform layer and the non-idealities
-        (their values when concrete scalars, else the leaf itself by identity: one fitted offset
-        shared by several datasets groups them, two separate ones do not); None for an angle
-        that is traced or not a scalar."""
+        """``(key, angle)`` (:meth:`Geometry.reading_group`): the key holds every field but the
+        angle and the quantity — the static ones (mode, averaging nodes, non-uniform layer) by
+        value, the non-idealities by value when concrete scalars (None counts as 0), else the
+        leaf itself by identity (one fitted offset put into several datasets,
+        ``fitting.instrument``, groups them; two separate ones do not); None for an angle that
+        is traced or not a scalar."""
         a = self.angle_deg
         if not is_concrete(a) or np.ndim(a) != 0:
             return None
 
-        def setting(x):
+        def setting(field):
+            x = getattr(self, field.name)
+            if field.metadata.get("static", False):
+                return x
+            if x is None:
+                return 0.0
             return float(np.asarray(x)) if is_concrete(x) and np.ndim(x) == 0 else ("leaf", id(x))
 
-        key = (type(self), self.mode, self.nonuniform_layer, self.average_nodes,
-               *(setting(x) for x in (self.angle_offset_deg, self.bandwidth_nm, self.thickness_spread)))
-        return key, float(np.asarray(a))
+        fields = [f for f in dataclasses.fields(self) if f.name not in ("angle_deg", "quantity")]
+        return (type(self), *((f.name, setting(f)) for f in fields)), float(np.asarray(a))
 
     def at_angles(self, angles_deg) -> "Ellipsometric":
         """The same instrument at the angles ``angles_deg`` (degrees, ``(angle,)``), quantity

@@ -121,15 +121,17 @@ def interpolate_table(x, table_nm, values):
     thicknesses and coefficients — each ``x``'s interval and weight are found now, in numpy, and
     a compiled model holds them as data: the result is a numpy constant when ``values`` are
     concrete too, else a gather and a weighted sum of the traced values (differentiable in
-    them). Traced ``x`` take ``jnp.interp`` (a search at run time)."""
+    them; a concrete table gives a numpy float64 result whatever JAX's precision, rounded where
+    it meets JAX arrays). Traced ``x`` and one-point tables take ``jnp.interp`` (a search at run
+    time)."""
     table = np.asarray(table_nm, dtype=float)
-    if not is_concrete(x):
+    if not is_concrete(x) or table.size < 2:
         return jnp.interp(x, table, jnp.asarray(values))
     x = np.asarray(x)
     i = np.clip(np.searchsorted(table, x, side="right") - 1, 0, table.size - 2)
     w = np.clip((x - table[i]) / (table[i + 1] - table[i]), 0.0, 1.0)
     v = np.asarray(values) if is_concrete(values) else jnp.asarray(values)
-    return v[i] * (1.0 - w) + v[i + 1] * w
+    return v[..., i] * (1.0 - w) + v[..., i + 1] * w
 
 
 class Tabulated(Material):

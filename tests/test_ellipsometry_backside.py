@@ -16,6 +16,8 @@ intensity: the slab is thicker than the coherence length).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -310,7 +312,7 @@ def test_measured_si3n4_on_bf33_wafer_fits_better_with_its_backside():
     import fitting as ft
     from layerstack_jax import io
 
-    m = io.read_measurement("examples/data/accurion_Si3N4_on_BF33.ds.dat")
+    m = io.read_measurement(Path(__file__).resolve().parents[1] / "examples" / "data" / "accurion_Si3N4_on_BF33.ds.dat")
     wl, angles = np.asarray(m.wavelength_nm), jnp.asarray(m.angles_deg)
     p2, dl = 2 * np.deg2rad(np.asarray(m.psi_deg)), -np.deg2rad(np.asarray(m.delta_deg))
     data = {"N": np.cos(p2), "C": np.sin(p2) * np.cos(dl), "S": np.sin(p2) * np.sin(dl)}
@@ -364,7 +366,7 @@ def test_measured_bare_glass_fits_with_its_backside_and_matches_the_beam_sum():
     import fitting as ft
     from layerstack_jax import io
 
-    m = io.read_measurement("examples/data/woollam_wvase_plasma_treated_glass.dat")
+    m = io.read_measurement(Path(__file__).resolve().parents[1] / "examples" / "data" / "woollam_wvase_plasma_treated_glass.dat")
     band = (np.asarray(m.wavelength_nm) >= 400.0) & (np.asarray(m.wavelength_nm) <= 1000.0)
     wl, angles = np.asarray(m.wavelength_nm)[band], np.asarray(m.angles_deg)
     values, sigma = np.asarray(m.values)[..., band], np.asarray(m.sigma)[..., band]

@@ -99,3 +99,15 @@ def test_database_formula_page_k_table_on_a_concrete_grid():
     got = m(wl)
     np.testing.assert_allclose(np.imag(np.asarray(got)), np.interp(wl, kw, [0.002, 0.001, 0.0]), rtol=1e-15, atol=1e-18)
     np.testing.assert_allclose(np.asarray(jax.jit(lambda x: m(x))(jnp.asarray(wl))), np.asarray(got), rtol=1e-14)
+
+
+def test_batched_table_values_and_a_one_point_table():
+    """Table values with a leading batch axis ``(*batch, table)`` interpolate along the last
+    axis; a one-point table gives its value (as ``jnp.interp``)."""
+    values = np.stack([TABLE_N, TABLE_K])
+    got = interpolate_table(GRID, TABLE_WL, values)
+    assert got.shape == (2, GRID.size)
+    np.testing.assert_allclose(got, [np.interp(GRID, TABLE_WL, v) for v in values], rtol=1e-15, atol=1e-17)
+    traced = jax.jit(lambda v: interpolate_table(GRID, TABLE_WL, v))(jnp.asarray(values))
+    np.testing.assert_allclose(np.asarray(traced), got, rtol=1e-15, atol=1e-17)
+    np.testing.assert_allclose(np.asarray(interpolate_table(np.array([500.0]), [500.0], [1.7])), [1.7])

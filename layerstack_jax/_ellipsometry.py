@@ -700,7 +700,7 @@ class Ellipsometric(Geometry):
         angle = self.angle_deg if self._is_zero("angle_offset_deg") else (
             jnp.asarray(self.angle_deg) + self.angle_offset_deg)
         band, spread = not self._is_zero("bandwidth_nm"), not self._is_zero("thickness_spread")
-        if not (band or spread) and is_coherent(stack):
+        if not self.depolarizes(stack):
             e = self._coherent_ellipsometry(stack, wavelength_nm, angle)
             return EllipsometerReading(e.psi_deg, e.delta_deg, e.N, e.C, e.S, jnp.zeros_like(e.psi_deg))
         N, C, S = averaged_ncs(stack, wavelength_nm, angle, bandwidth_nm=self.bandwidth_nm,

@@ -436,19 +436,18 @@ for backside in (True, False):
 print(fits_glass[True].report())
 
 # %%
-glass_read = {}
+glass_read, n633 = {}, {}
 for backside, r in fits_glass.items():
     A, B = (float(np.squeeze(v)) for v in r.values.values())
+    n633[backside] = A + B / 0.633**2
     glass_read[backside] = ls.Ellipsometric(glass_angles, "psi").reading(glass_stack(backside, A, B),
                                                                        glass_m.wavelength_nm)
     rms_psi = float(np.sqrt(np.mean((np.asarray(glass_read[backside].psi_deg) - glass_m.psi_deg) ** 2)))
-    print(f"{'with' if backside else 'without':7} the backside: n(633 nm) = {A + B / 0.633**2:.4f}, "
+    print(f"{'with' if backside else 'without':7} the backside: n(633 nm) = {n633[backside]:.4f}, "
           f"ψ rms {rms_psi:.3f}°, χ² {r.chi2:.4g}")
-n633_glass = sum(float(np.squeeze(v)) * f for v, f in zip(fits_glass[True].values.values(), (1.0, 1 / 0.633**2)))
+n633_glass = n633[True]
 depol_model = np.asarray(glass_read[True].depolarization)  # (angle, wl)
-dpol_rows = np.asarray(glass_file.extras["dPolE"])  # (wavelength nm, angle, depolarization %, σ)
-depol_file = np.array([np.interp(glass_m.wavelength_nm, r[:, 0], r[:, 2]) / 100
-                       for r in (dpol_rows[np.isclose(dpol_rows[:, 1], a)] for a in glass_m.angles_deg)])
+depol_file = glass_m.depolarization()  # the file's dPolE rows as fractions, (angle, wl)
 print("median depolarization, file vs model, per angle: " + ", ".join(
     f"{a:.0f}° {f:.3f}/{mo:.4f}" for a, f, mo in zip(glass_m.angles_deg, np.median(depol_file, 1), np.median(depol_model, 1))))
 assert fits_glass[True].converged and 1.50 < n633_glass < 1.53

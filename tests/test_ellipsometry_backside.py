@@ -403,8 +403,8 @@ def test_measured_bare_glass_fits_with_its_backside_and_matches_the_beam_sum():
 
     depol = np.asarray(reading.depolarization)
     assert np.all((depol >= 0) & (depol <= 1))
-    rows = np.asarray(m.extras["dPolE"])  # (wavelength nm, angle, depolarization %, σ)
-    measured = np.array([np.interp(wl, r[:, 0], r[:, 2]) / 100 for r in (rows[np.isclose(rows[:, 1], a)] for a in angles)])
+    measured = m.depolarization()[:, band]  # the file's dPolE rows as fractions, (angle, wl)
+    assert not np.any(np.isnan(measured))
     median_model, median_measured = np.median(depol, axis=1), np.median(measured, axis=1)
     late = angles >= 59.0
     assert np.all(np.diff(median_model[late]) > 0) and np.all(np.diff(median_measured[late]) > 0)

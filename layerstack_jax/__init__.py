@@ -73,6 +73,8 @@ from ._oscillators import Drude as Drude
 from ._oscillators import Lorentz as Lorentz
 from ._oscillators import TaucLorentz as TaucLorentz
 from ._oscillators import photon_energy as photon_energy
+from ._programs import compilation_cache_dir as compilation_cache_dir
+from ._programs import use_compilation_cache as use_compilation_cache
 from ._polarimetry import apply_mueller as apply_mueller
 from ._polarimetry import cloude_eigenvalues as cloude_eigenvalues
 from ._polarimetry import coherency_matrix as coherency_matrix
@@ -130,6 +132,7 @@ __all__ = [
     "CoatingTables",
     "CodyLorentz",
     "coherency_matrix",
+    "compilation_cache_dir",
     "ColourSpace",
     "database_version",
     "DatabaseFormula",
@@ -214,6 +217,7 @@ __all__ = [
     "Tabulated",
     "TabulatedSpectrum",
     "TaucLorentz",
+    "use_compilation_cache",
     "VISIBLE_RANGE_NM",
     "write_measurement_csv",
     "write_zarr_cube",

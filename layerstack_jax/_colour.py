@@ -67,6 +67,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._programs import public_program
 from ._numerics import safe_atan2, safe_sqrt
 from ._validate import LayerstackError, is_concrete
 
@@ -245,6 +246,7 @@ class ColourSpace(eqx.Module):
         self.white_XYZ = jnp.asarray(white)
         self.rgb_matrix = jnp.asarray(_srgb_matrix(white, adaptation))
 
+    @public_program
     def XYZ(self, reflectance: Float[ArrayLike, "*batch wl"]) -> Float[Array, "*batch 3"]:
         """Tristimulus values (Y = 100 for a perfect reflector) of reflectance/transmittance
         spectra sampled on the grid (last axis)."""
@@ -255,19 +257,23 @@ class ColourSpace(eqx.Module):
             )
         return R @ self.weights
 
+    @public_program
     def xyY(self, reflectance) -> Float[Array, "*batch 3"]:
         """Chromaticity x, y and luminance Y (black → the white's chromaticity)."""
         return xyz_to_xyy(self.XYZ(reflectance), self.white_XYZ)
 
+    @public_program
     def Lab(self, reflectance) -> Float[Array, "*batch 3"]:
         """CIELAB L*, a*, b* relative to this illuminant's white."""
         return xyz_to_lab(self.XYZ(reflectance), self.white_XYZ)
 
+    @public_program
     def sRGB(self, reflectance, *, encode: bool = True, clip: bool = False) -> Float[Array, "*batch 3"]:
         """sRGB in [0, 1]: linear (``encode=False``) or gamma-encoded (default); ``clip=True``
         clips the linear values to [0, 1] first (out-of-gamut colours)."""
         return self.XYZ_to_sRGB(self.XYZ(reflectance), encode=encode, clip=clip)
 
+    @public_program
     def XYZ_to_sRGB(self, XYZ, *, encode: bool = True, clip: bool = False) -> Float[Array, "*batch 3"]:
         """sRGB from XYZ on the Y = 100 scale (see :meth:`sRGB`)."""
         rgb = (jnp.asarray(XYZ) / 100.0) @ self.rgb_matrix.T
@@ -277,6 +283,7 @@ class ColourSpace(eqx.Module):
 
 
 # ------------------------------------------------------------------------- pure functions
+@public_program
 def xyz_to_xyy(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Optional[ArrayLike] = None) -> Float[Array, "*batch 3"]:
     """x = X/(X+Y+Z), y = Y/(X+Y+Z), Y. For black (X+Y+Z = 0) x, y are those of ``white_XYZ``
     (colour-science's convention), or 0 if no white is given.
@@ -300,6 +307,7 @@ def _lab_f(t):
     return jnp.where(t > _EPSILON_LAB, cube, t / (3.0 * (6.0 / 29.0) ** 2) + 4.0 / 29.0)
 
 
+@public_program
 def xyz_to_lab(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Float[ArrayLike, "3"]) -> Float[Array, "*batch 3"]:
     """CIELAB (CIE 15:2004 eqs. 8.3–8.5): L* = 116 f(Y/Yn) − 16, a* = 500 [f(X/Xn) − f(Y/Yn)],
     b* = 200 [f(Y/Yn) − f(Z/Zn)]; XYZ and the white on the same scale (Y = 100 or Y = 1 for
@@ -309,12 +317,13 @@ def xyz_to_lab(XYZ: Float[ArrayLike, "*batch 3"], white_XYZ: Float[ArrayLike, "3
     dimensionless (L* = 100 for the white).
     """
     f = _lab_f(jnp.asarray(XYZ) / jnp.asarray(white_XYZ))
-    L = 116.0 * f[..., 1] - 16.0
+    L = 116.0 * (f[..., 1] - 4.0 / 29.0)  # = 116 f - 16, and exactly 0 for black however products fuse
     a = 500.0 * (f[..., 0] - f[..., 1])
     b = 200.0 * (f[..., 1] - f[..., 2])
     return jnp.stack([L, a, b], axis=-1)
 
 
+@public_program
 def srgb_encode(rgb_linear):
     """sRGB transfer function (IEC 61966-2-1): 12.92 L for L <= 0.0031308, else
     1.055 L^(1/2.4) − 0.055 (negative values stay on the linear segment).
@@ -328,6 +337,7 @@ def srgb_encode(rgb_linear):
     return jnp.where(L <= _SRGB_BREAK, 12.92 * L, power)
 
 
+@public_program
 def delta_e_ab(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batch 3"]) -> Float[Array, "*batch"]:
     """CIE 1976 ΔE*ab: the Euclidean distance in CIELAB (zero gradient at ΔE = 0).
 
@@ -338,6 +348,7 @@ def delta_e_ab(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batc
     return safe_sqrt(jnp.sum(d * d, axis=-1))
 
 
+@public_program
 def delta_e_2000(lab1: Float[ArrayLike, "*batch 3"], lab2: Float[ArrayLike, "*batch 3"], *,
                  k_L: float = 1.0, k_C: float = 1.0, k_H: float = 1.0) -> Float[Array, "*batch"]:
     """CIEDE2000 colour difference ΔE00 (CIE 142-2001; eqs. 1–22 of Sharma, Wu & Dalal 2005).

@@ -189,6 +189,7 @@ import numpy as np
 
 import equinox as eqx
 
+from ._programs import public_program
 from ._coherent import packet_amplitudes
 from ._geometry import Geometry
 from ._custom_types import Array, Complex, Float, RealLike
@@ -328,6 +329,7 @@ def transmission_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
     return jnp.broadcast_to(tau[0], shape), jnp.broadcast_to(tau[1], shape)
 
 
+@public_program
 def reflection_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
     r"""Complex amplitude reflection coefficients :math:`(r_s, r_p)` of a coherent stack.
 
@@ -346,6 +348,7 @@ def reflection_amplitudes(stack: Stack, wavelength_nm, angle_deg: RealLike):
     return _amplitudes_resolved(rs, jnp.deg2rad(angle_deg))
 
 
+@public_program
 def ellipsometry(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Ellipsometry:
     r"""Ellipsometric angles :math:`\psi, \Delta` and ratio :math:`\rho = r_p/r_s` of a coherent stack.
 

@@ -74,7 +74,11 @@ def normal_wavevector(n: ComplexLike, s: RealLike) -> Complex[Array, "..."]:
         imaginary past the critical angle of a lossless medium).
     """
     n = as_complex(n, jnp.complex64)
-    return _forward_sqrt(n * n - as_complex(jnp.asarray(s) ** 2, n))
+    s = as_complex(jnp.asarray(s), n)
+    # (n - s)(n + s), not n² - s²: exactly 0 at a critical angle or grazing incidence (s = n)
+    # however the compiler contracts the products (a fused multiply-add leaves the rounding
+    # error of s², ~1e-16, and q ~ 1e-8 where it must be 0)
+    return _forward_sqrt((n - s) * (n + s))
 
 
 def divide(num: ComplexLike, den: ComplexLike) -> Complex[Array, "..."]:

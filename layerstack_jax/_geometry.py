@@ -22,6 +22,7 @@ Angles are degrees in [0, 90) everywhere at this surface; wavelengths in nm.
 from __future__ import annotations
 
 import abc
+import re
 from typing import ClassVar, Optional
 
 import equinox as eqx
@@ -36,9 +37,10 @@ from ._instrument import (DEFAULT_CONE_NODES, cap_measure, check_cone, cone_rule
 from ._optics import Optics, check_optics, coherent_films
 from ._quadrature import DEFAULT_NODES
 from ._response import join_interfaces, natural, stack_interfaces, stack_intensities
+from ._programs import public_program
 from ._stack import LambertianBackground, ResolvedStack, Stack, as_spectrum, resolve
 from ._validate import (LayerstackError, check_angle_deg, check_nonnegative, check_positive, check_unit_interval,
-                        is_concrete)
+                        is_concrete, warn_if_radians)
 
 # the illumination drivers are public through this module too (their historical home)
 from ._illumination import Diffuse, Response, diffuse, specular  # noqa: F401  (re-exported)
@@ -858,10 +860,24 @@ def parse_geometry(text: str) -> Geometry:
             g = None
             break
         if g is not None:
+            warn_if_radians(f"geometry {text!r}: angles (degrees)", _spelled_angles(t))
             return g
     raise LayerstackError(f"unknown geometry {text!r}: use " + ", ".join(k.spelling for k in _KINDS if k.spelling))
 
 
+def _spelled_angles(text: str) -> np.ndarray:
+    """The numbers of a geometry's spelling outside its ``key=value`` options (its angles:
+    ``specular:30``, ``45/0``, ``brdf:45:0``, ``ellipsometry:65,70:psi``)."""
+    numbers = []
+    for part in re.split(r"[:/,]", text):
+        try:
+            numbers.append(float(part))
+        except ValueError:
+            pass
+    return np.asarray(numbers if numbers else [0.0])
+
+
+@public_program
 def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES) -> Optics:
     """The :class:`Optics` of ``stack`` measured in ``geometry`` on ``wavelength_nm`` (nm).
 
@@ -881,6 +897,7 @@ def _check_geometry(geometry) -> None:
                               f"got {geometry!r}")
 
 
+@public_program
 def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES,
                 optics: Optional[Optics] = None) -> Float[Array, "*angle wl"]:
     r"""What an instrument of the given geometry reads, for natural light, shaped ``(wl,)``
@@ -910,6 +927,7 @@ def reflectance(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int =
     return geometry.measure(stack, wavelength_nm, nodes=nodes, optics=optics)
 
 
+@public_program
 def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry, *, nodes: int = DEFAULT_NODES):
     r"""Intrinsic reflectance :math:`\rho_g` of the background from a measured spectrum.
 

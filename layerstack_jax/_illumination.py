@@ -27,6 +27,7 @@ from ._quadrature import DEFAULT_NODES, evanescent_beyond, hemispherical_rule
 from ._response import Interfaces, natural, stack_interfaces, stack_intensities, thick_layer_parameters, thick_media
 from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check_angle_deg, is_concrete, warn_if_implausible
+from ._programs import public_program
 
 __all__ = ["Response", "Diffuse", "snell_invariant", "snell_invariant_from_cos", "specular", "diffuse",
            "diffuse_resolved", "natural_T_front", "hemisphere"]
@@ -92,6 +93,7 @@ def _wavelength_axis(x, rs: ResolvedStack):
     return None if x is None else jnp.broadcast_to(x, x.shape[:-1] + rs.wavelength.shape[-1:])
 
 
+@public_program
 def specular(stack: Stack, wavelength_nm, angle_deg: Optional[RealLike] = None, *,
              angle_rad: Optional[RealLike] = None, both_sides: bool = True) -> Response:
     r"""Specular reflectance and transmittance of ``stack`` for collimated light.
@@ -116,7 +118,7 @@ def specular(stack: Stack, wavelength_nm, angle_deg: Optional[RealLike] = None, 
         angle_deg = jnp.rad2deg(jnp.asarray(angle_rad)) if not is_concrete(angle_rad) else np.rad2deg(np.asarray(angle_rad, float))
     else:  # until 0.1 the third argument was radians: a value that reads like one is called out
         warn_if_implausible("specular: angle_deg", angle_deg,
-                            lambda a: (np.max(a) > 0) & (np.max(a) <= np.pi / 2) & np.any(a != np.round(a)),
+                            lambda a, xp: (xp.max(a) > 0) & (xp.max(a) <= xp.pi / 2) & xp.any(a != xp.round(a)),
                             "all within (0, pi/2] and not whole degrees: radians given? pass angle_rad= for radians")
     angle_deg = check_angle_deg("specular: angle of incidence (angle_deg)", 0.0 if angle_deg is None else angle_deg,
                                 grazing=True)
@@ -214,6 +216,7 @@ def diffuse_resolved(rs: ResolvedStack, side: str, nodes: int) -> Diffuse:
     return diffuse_joined(rs, side, stack_interfaces(rs, s, both_sides=(side == "back")), w, plan)
 
 
+@public_program
 def diffuse(stack: Stack, wavelength_nm, side: str = "front", *, nodes: int = DEFAULT_NODES) -> Diffuse:
     """Diffuse (Lambertian, natural light) reflectance and transmittance of the stack.
 

@@ -61,6 +61,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
+from ._programs import public_program
 from ._coherent import PacketIntensities, packet_amplitudes
 from ._custom_types import Array, Float, RealLike, Spectrum
 from ._fresnel import exit_medium_ratio, normal_wavevector, power_flux
@@ -142,6 +143,7 @@ def _background_factor(stack: Stack, rs: ResolvedStack, nodes: int) -> Spectrum:
     return exit_medium_ratio(rs.n[0], rs.n[-1]) * rho / (jnp.pi * (1.0 - rho * r_b))
 
 
+@public_program
 def polarized_brdf(
     stack: Stack, wavelength_nm, incidence_deg: RealLike, viewing_deg: RealLike, *, nodes: int = DEFAULT_NODES
 ) -> Float[Array, "*angle 2 2 wl"]:
@@ -179,6 +181,7 @@ def _partial_polarizer_vector(T):
     return jnp.stack([0.5 * (T_s + T_p), 0.5 * (T_p - T_s), zero, zero], axis=-2)
 
 
+@public_program
 def diffuse_mueller(
     stack: Stack, wavelength_nm, incidence_deg: RealLike, viewing_deg: RealLike, *, nodes: int = DEFAULT_NODES
 ) -> Float[Array, "*angle 4 4 wl"]:
@@ -267,6 +270,7 @@ def _reflection_mueller(R_s, R_p, X):
     return jnp.stack([jnp.stack(row, axis=-2) for row in rows], axis=-3)
 
 
+@public_program
 def specular_mueller(stack: Stack, wavelength_nm, angle_deg: RealLike) -> Float[Array, "*angle 4 4 wl"]:
     r"""Mueller matrix of the stack's specular (front) reflection, dimensionless.
 

@@ -54,6 +54,7 @@ import jax.numpy as jnp
 import jax.scipy.special as jsp
 import numpy as np
 
+from ._programs import public_program
 from ._custom_types import Array, Float, RealLike, Spectrum
 from ._fresnel import exit_medium_ratio
 from ._illumination import diffuse_resolved, snell_invariant_from_cos
@@ -194,6 +195,7 @@ def _rough_background_factor(rs: ResolvedStack, E, nodes: int) -> Spectrum:
     return ratio * rho / (jnp.pi * (1.0 - rho * r_b))
 
 
+@public_program
 def rough_brdf(
     stack: Stack,
     wavelength_nm,

@@ -10,7 +10,7 @@ differentiated.
 
 from __future__ import annotations
 
-import warnings
+import functools
 from typing import NamedTuple, Optional, Union
 
 import equinox as eqx
@@ -19,8 +19,8 @@ import numpy as np
 
 from ._custom_types import IndexSpectrum, RealLike, RealSpectrumLike, TableColumn, Wavelengths
 from ._materials import Index, Material, Tabulated, as_material
-from ._validate import (LayerstackError, LayerstackWarning, PendingChecks, check, check_nonnegative, check_positive,
-                        check_unit_interval, is_concrete, warn_if_implausible)
+from ._validate import (LayerstackError, PendingChecks, check, check_nonnegative, check_positive,
+                        check_unit_interval, is_concrete, value_text, warn_if, warn_if_implausible)
 
 __all__ = [
     "Layer",
@@ -175,28 +175,59 @@ def _check_index(name: str, n, **pending):
 
 
 def _warn_implausible(stack: Stack, wl, n: tuple) -> None:
-    """Plausibility warnings on concrete inputs (issue: "implausible input gets a warning")."""
-    warn_if_implausible("wavelength_nm", wl, lambda a: (a < 100) | (a > 50_000),
+    """Plausibility warnings on the indices and the grid (:func:`~layerstack_jax._validate.warn_if`:
+    at once on concrete inputs, as outputs of a public program on traced ones)."""
+    warn_if_implausible("wavelength_nm", wl, lambda a, xp: (a < 100) | (a > 50_000),
                         "outside 100 nm - 50 µm: wavelengths are in nm (µm given?)")
-    if not is_concrete(wl):
-        return
-    w = np.asarray(wl, float)
-    step = float(np.max(np.diff(w))) if w.size >= 5 else None  # a few points are not a spectrum that aliases
     for i, (layer, ni) in enumerate(zip(stack.layers, n[1:-1])):
-        label = f"layers[{i}] ({layer.name or 'unnamed'})"
-        if layer.coherent and step is not None and is_concrete((layer.thickness, ni)):
-            # interference fringes of period λ²/(2 n d) in wavelength; fewer than 2 grid points
-            # per fringe and the computed spectrum aliases (float32 and float64 then disagree)
-            optical = 2.0 * np.max(np.real(np.asarray(ni))) * np.max(np.asarray(layer.thickness, float))
-            period = float(np.min(w)) ** 2 / max(optical, 1e-300)
-            if period < 2.0 * step:
-                warnings.warn(
-                    f"{label}: coherent film of {np.max(np.asarray(layer.thickness, float)):g} nm has fringes every "
-                    f"{period:.3g} nm, finer than twice the grid step ({step:g} nm): the spectrum aliases; "
-                    "should it be coherent = false (a thick layer)?", LayerstackWarning, stacklevel=3)
-        if layer.alpha is not None and is_concrete(ni) and np.any(np.imag(np.asarray(ni)) > 0):
-            warnings.warn(f"{label}: both k (in the index) and alpha are given; their absorptions add "
-                          "(alpha_total = alpha + 4 pi k / lambda): give one of them", LayerstackWarning, stacklevel=3)
+        label = _layer_label(i, layer)
+        if layer.coherent and np.shape(wl)[-1] >= 5:  # a few points are not a spectrum that aliases
+            warn_if((layer.thickness, ni, wl), _fringes_alias, functools.partial(_aliasing_message, label))
+        if layer.alpha is not None:
+            warn_if(ni, lambda a, xp: xp.imag(a) > 0,
+                    lambda a: f"{label}: both k (in the index) and alpha are given; their absorptions add "
+                              "(alpha_total = alpha + 4 pi k / lambda): give one of them")
+
+
+def _layer_label(i: int, layer: Layer) -> str:
+    return f"layers[{i}] ({layer.name or 'unnamed'})"
+
+
+def _fringes_alias(values, xp):
+    """Interference fringes of a coherent film, period λ²/(2 n d) in wavelength, with fewer than 2
+    grid points per fringe: the computed spectrum aliases (float32 and float64 then disagree)."""
+    d, ni, w = values
+    return _fringe_period(d, ni, w, xp) < 2.0 * xp.max(xp.diff(w))
+
+
+def _fringe_period(d, ni, w, xp):
+    optical = 2.0 * xp.max(xp.real(ni)) * xp.max(d)
+    return xp.min(w) ** 2 / xp.maximum(optical, 1e-300)
+
+
+def _aliasing_message(label: str, values) -> str:
+    d, ni, w = values
+    return (f"{label}: coherent film of {np.max(d):g} nm has fringes every {_fringe_period(d, ni, w, np):.3g} nm, "
+            f"finer than twice the grid step ({np.max(np.diff(w)):g} nm): the spectrum aliases; "
+            "should it be coherent = false (a thick layer)?")
+
+
+def _warn_units(stack: Stack, wl, d: list, alpha: list) -> None:
+    """Unit slips that would otherwise end in a plausible-looking wrong spectrum: a thick layer's
+    thickness given in µm (30 for 30 µm: a 30 nm "thick" layer, i.e. no layer), α in 1/cm or 1/µm
+    (20/cm read as 20/nm: an opaque layer, a spectrum of the front reflection only)."""
+    for i, (layer, h, a) in enumerate(zip(stack.layers, d, alpha)):
+        label = _layer_label(i, layer)
+        if not layer.coherent:
+            warn_if((h, wl), lambda v, xp: (v[0] > 0) & (v[0] < xp.max(v[1])),
+                    lambda v, label=label: f"{label}: thickness (nm) {value_text(v[0])}: an incoherent (thick) layer "
+                    f"thinner than the longest wavelength ({np.max(v[1]):g} nm): thicknesses are in nm (µm given? "
+                    "30 µm = 30000 nm); a film this thin is coherent (coherent = true)")
+        if a is not None:
+            warn_if(a, lambda v, xp: v > 1.0,
+                    lambda v, label=label: f"{label}: alpha (1/nm) {value_text(v)}: an absorption length below 1 nm "
+                    "(no material absorbs that strongly): alpha is in 1/nm (1/cm given? 1/cm = 1e-7/nm; "
+                    "1/µm = 1e-3/nm)")
 
 
 def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
@@ -228,6 +259,7 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
         d.append(jnp.asarray(check_nonnegative(f"{label}: thickness (nm)", h, pending=checks, key=("d", i))))
         a = None if layer.alpha is None else _on_grid(f"{label}: alpha (1/nm)", as_spectrum(layer.alpha, wl), wl)
         alpha.append(None if a is None else check_nonnegative(f"{label}: alpha (1/nm)", a, pending=checks, key=("alpha", i)))
+    _warn_units(stack, wl, d, alpha)
     attached = checks.attach()
     if attached is not None:  # the first traced value carries every traced check
         key, value = attached

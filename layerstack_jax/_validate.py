@@ -9,14 +9,20 @@ a number. Callers must *use the returned value* for the traced check to take eff
 choke point is :func:`layerstack_jax._stack.resolve`, through which every public function
 samples a stack.
 
-Plausibility checks (:func:`warn_if_implausible`) only warn, naming the field and the likely
-mistake (µm given for nm, percent for a fraction).
+Plausibility checks (:func:`warn_if_implausible`, :func:`warn_if`) only warn, naming the field
+and the likely mistake (µm given for nm, percent for a fraction).
+
+While a public function is traced into one compiled program (:mod:`layerstack_jax._programs`),
+a :class:`ProgramChecks` collector is active instead: every traced check and plausibility test
+becomes an output flag of the program, and the host raises or warns after it ran — the same
+error (with the offending values) and the same warnings as an eager call.
 """
 
 from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import warnings
 from typing import Callable, Optional
 
@@ -38,6 +44,11 @@ __all__ = [
     "check_angle_deg",
     "check_wavelength_range",
     "warn_if_implausible",
+    "warn_if",
+    "warn_if_radians",
+    "value_text",
+    "ProgramChecks",
+    "collecting_checks",
 ]
 
 
@@ -55,7 +66,8 @@ def is_concrete(x) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
-def _range_text(a: np.ndarray) -> str:
+def value_text(a: np.ndarray) -> str:
+    """A value or the range of an array, for messages."""
     a = np.asarray(a)
     if a.size == 1:
         return repr(a.reshape(()).item())
@@ -91,6 +103,34 @@ class PendingChecks:
         return key, eqx.branched_error_if(x, jnp.any(preds), jnp.argmax(preds), tuple(self.messages))
 
 
+class ProgramChecks:
+    """What the checks met while tracing one public program found, as traced values.
+
+    ``errors``: one boolean per traced check (True: the input violates it); ``warnings``:
+    ``(flag, values, message)`` per plausibility test, ``message(values_as_numpy) -> str``. The
+    program returns the flags (and the values of flagged tests) next to its result; the host
+    decides (:mod:`layerstack_jax._programs`)."""
+
+    def __init__(self):
+        self.errors: list = []
+        self.warnings: list = []
+
+
+_PROGRAM_CHECKS: contextvars.ContextVar = contextvars.ContextVar("layerstack_program_checks", default=None)
+
+
+@contextlib.contextmanager
+def collecting_checks():
+    """Within this block, traced checks and plausibility tests are collected into the yielded
+    :class:`ProgramChecks` instead of ``equinox.error_if`` / being skipped."""
+    collector = ProgramChecks()
+    token = _PROGRAM_CHECKS.set(collector)
+    try:
+        yield collector
+    finally:
+        _PROGRAM_CHECKS.reset(token)
+
+
 _TRACED_CHECKS = contextvars.ContextVar("layerstack_traced_checks", default=True)
 
 
@@ -123,10 +163,14 @@ def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingCh
     if is_concrete(x):
         a = np.asarray(x)
         if np.any(bad(a, np)):
-            raise LayerstackError(f"{name} {what}, got {_range_text(a)}")
+            raise LayerstackError(f"{name} {what}, got {value_text(a)}")
         return x
     xj = jnp.asarray(x)
     if not _TRACED_CHECKS.get():
+        return xj
+    collector = _PROGRAM_CHECKS.get()
+    if collector is not None:
+        collector.errors.append(jnp.any(bad(xj, jnp)))
         return xj
     if pending is not None:
         pending.add(key, xj, jnp.any(bad(xj, jnp)), f"{name} {what}")
@@ -150,7 +194,12 @@ def check_wavelength_range(name: str, x, lo: float, hi: float):
     x = jnp.asarray(x)
     if not _TRACED_CHECKS.get():
         return x
-    return eqx.error_if(x, (x < lo - 1e-9) | (x > hi + 1e-9), f"{name}: wavelengths outside the data range {lo:g}–{hi:g} nm")
+    outside = (x < lo - 1e-9) | (x > hi + 1e-9)
+    collector = _PROGRAM_CHECKS.get()
+    if collector is not None:
+        collector.errors.append(jnp.any(outside))
+        return x
+    return eqx.error_if(x, outside, f"{name}: wavelengths outside the data range {lo:g}–{hi:g} nm")
 
 
 def check_finite(name: str, x, **pending):
@@ -183,10 +232,46 @@ def check_angle_deg(name: str, x, *, grazing: bool = False):
 
 
 def warn_if_implausible(name: str, x, implausible: Callable, likely: str) -> None:
-    """Warn (:class:`LayerstackWarning`) when concrete ``x`` has an entry marked by
-    ``implausible(a)`` (numpy); ``likely`` says the probable mistake. Traced values pass."""
-    if x is None or not is_concrete(x):
+    """Warn (:class:`LayerstackWarning`) when ``x`` has an entry marked by ``implausible(a, xp)``
+    (``xp`` = numpy or jax.numpy); ``likely`` says the probable mistake. The message names the
+    field and its values: ``"<name>: <values>: <likely>"``. See :func:`warn_if`."""
+    if x is None:
         return
-    a = np.asarray(x)
-    if np.any(implausible(a)):
-        warnings.warn(f"{name}: {_range_text(a)}: {likely}", LayerstackWarning, stacklevel=3)
+    warn_if(x, implausible, lambda a: f"{name}: {value_text(a)}: {likely}", stacklevel=4)
+
+
+def warn_if(values, implausible: Callable, message: Callable, *, stacklevel: int = 3) -> None:
+    """Warn (:class:`LayerstackWarning`) with ``message(values)`` when ``implausible(values, xp)``
+    (``xp`` = numpy or jax.numpy; ``values`` any pytree of arrays) has a True entry.
+
+    Concrete values: tested and warned at once (``message`` gets numpy arrays). Traced values
+    while a public program is traced (:func:`collecting_checks`): the test becomes an output of the
+    program and the host warns after it ran. Traced values elsewhere (inside a user's ``jit``,
+    ``grad`` or ``vmap``): the program calls back to the host with the test's outcome
+    (``jax.debug.callback``), which warns when it is True; not inside :func:`traced_checks_off`
+    (a solver's trial points).
+    """
+    if is_concrete(values):
+        a = jax.tree_util.tree_map(np.asarray, values)
+        if np.any(implausible(a, np)):
+            warnings.warn(message(a), LayerstackWarning, stacklevel=stacklevel)
+        return
+    flag = jnp.any(implausible(values, jnp))
+    collector = _PROGRAM_CHECKS.get()
+    if collector is not None:
+        collector.warnings.append((flag, values, message))
+    elif _TRACED_CHECKS.get():
+        jax.debug.callback(functools.partial(_warn_on_host, message), flag, values)
+
+
+def _warn_on_host(message: Callable, flag, values) -> None:
+    if np.any(np.asarray(flag)):
+        warnings.warn(message(jax.tree_util.tree_map(np.asarray, values)), LayerstackWarning, stacklevel=2)
+
+
+def warn_if_radians(name: str, angle_deg) -> None:
+    """Warn when angles meant in degrees read like radians: all within (0, π/2] and not all whole
+    degrees (``specular:1.2217`` for 70°)."""
+    warn_if_implausible(name, angle_deg,
+                        lambda a, xp: (xp.max(a) > 0) & (xp.max(a) <= xp.pi / 2) & xp.any(a != xp.round(a)),
+                        "all within (0, pi/2] and not whole degrees: radians given? angles are in degrees")

@@ -132,6 +132,7 @@ NOT_SPECTRA = {
     "read_csv_columns": "files", "read_measurement": "files", "read_spectra_csv": "files",
     "save_spectra_csv": "files", "save_stack": "files", "stack_from_dict": "files", "stack_to_dict": "files",
     "write_measurement_csv": "files", "memory_budget": "memory for chunk='auto' (test_auto_chunks)",
+    "use_compilation_cache": "configuration (test_programs)", "compilation_cache_dir": "a path (test_programs)",
 }
 
 CASES = [(name, kind, angle) for name in (*ARRAY_RETURNING, *TUPLE_RETURNING)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from layerstack_jax import DEFAULT_NODES, Ellipsometric, LayerstackError, check_stack, reflectance
+from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, parse_geometry, reflectance
 from layerstack_jax.io import (check_instrument_used, instrument_geometry, load_instrument, load_stack, parse_values,
                                parse_wavelengths, save_spectra_csv)
 
@@ -29,7 +30,12 @@ def _add_predict_parser(sub) -> None:
                    help="start:stop:step in nm (stop included), one value, or a comma list (default 380:780:5)")
     p.add_argument("--geometry", "-g", action="append", required=True, metavar="GEOM",
                    help="measurement geometry; repeat for several (see below)")
-    p.add_argument("--output", "-o", required=True, metavar="OUT.csv", help="CSV file to write")
+    p.add_argument("--output", "-o", required=True, metavar="OUT",
+                   help="file to write, by its suffix: .csv (wavelength_nm, then one column per spectrum); for "
+                        "--vary/--vary-table batches also .nc or .zarr (an xarray Dataset: one variable per geometry, "
+                        "dims sample x wavelength_nm, the varied fields as coordinates), .npz (numpy arrays with the "
+                        "wavelengths and varied values) or .npy (the spectra alone, geometry x sample x wavelength); "
+                        f"a CSV holds at most {CSV_MAX_COLUMNS} spectra")
     p.add_argument("--plot", metavar="OUT.png", help="also write a plot of the spectra (PNG)")
     p.add_argument("--float32", action="store_true", help="compute in float32 (default: float64)")
     p.add_argument("--nodes", type=_positive_int, default=DEFAULT_NODES, metavar="N",
@@ -181,9 +187,24 @@ def _sample_label(names: list, row) -> str:
     return " ".join(f"{n}={v:.12g}" for n, v in zip(names, row))
 
 
-def _predict_batch(args, stack, wavelength, requested) -> tuple[dict, dict]:
-    """Columns ``{GEOM? name=value ...: (wl,)}`` of every sample of ``--vary``/``--vary-table``,
-    computed by :func:`layerstack_jax.predict` (batched, chunked: bounded memory)."""
+class _Batch(NamedTuple):
+    """The spectra of a ``--vary``/``--vary-table`` batch: ``spectra[g]`` ``(samples, wl)`` per
+    requested geometry ``g``, one row per sample of the varied fields ``names`` with ``values``
+    ``(samples, fields)``."""
+
+    names: list
+    values: np.ndarray
+    spectra: dict
+    geometries: dict
+
+
+#: Largest number of columns written to a CSV; larger batches go to .nc, .zarr, .npz or .npy.
+CSV_MAX_COLUMNS = 2000
+
+
+def _predict_batch(args, stack, wavelength, requested) -> _Batch:
+    """Every sample of ``--vary``/``--vary-table``, computed by :func:`layerstack_jax.predict`
+    (batched, chunked: bounded memory; a progress bar on stderr for large batches)."""
     from layerstack_jax import predict
 
     if args.polarization or args.ellipsometry:
@@ -197,34 +218,96 @@ def _predict_batch(args, stack, wavelength, requested) -> tuple[dict, dict]:
         except LayerstackError as e:
             msg = str(e)
             raise LayerstackError(msg if msg.startswith(name) else f"{name}: {msg}") from None
-    labels = [_sample_label(names, row) for row in values]
+    rows = np.unique(values, axis=0)
+    if rows.shape[0] != values.shape[0]:
+        raise LayerstackError(f"two samples have the same values: {values.shape[0] - rows.shape[0]} repeated row(s)")
+    n = values.shape[0]
+    spectra, geometries = {}, {}
+    for gname, geometry in requested:
+        try:
+            spectra[gname] = np.asarray(predict(batched, wavelength, geometry, batch_shape=(n,), nodes=args.nodes,
+                                                chunk=args.chunk, progress=True if n >= 10_000 else None),
+                                        dtype=float)
+        except LayerstackError as e:
+            raise LayerstackError(f"geometry {gname!r}: {e}") from None
+        geometries[gname] = geometry
+    return _Batch(names, values, spectra, geometries)
+
+
+def _batch_columns(batch: _Batch) -> tuple[dict, dict]:
+    """The batch as CSV columns ``{[GEOM ]name=value ...: (wl,)}`` (one per sample and geometry)."""
+    labels = [_sample_label(batch.names, row) for row in batch.values]
     if len(set(labels)) != len(labels):
         raise LayerstackError("two samples have the same values (to 12 digits): "
                               f"{next(x for x in labels if labels.count(x) > 1)}")
     columns, geometries = {}, {}
-    for gname, geometry in requested:
-        try:
-            spectra = predict(batched, wavelength, geometry, batch_shape=(values.shape[0],), nodes=args.nodes,
-                              chunk=args.chunk)
-        except LayerstackError as e:
-            raise LayerstackError(f"geometry {gname!r}: {e}") from None
-        for label, spectrum in zip(labels, np.asarray(spectra, dtype=float)):
-            key = label if len(requested) == 1 else f"{gname} {label}"
+    for gname, spectra in batch.spectra.items():
+        for label, spectrum in zip(labels, spectra):
+            key = label if len(batch.spectra) == 1 else f"{gname} {label}"
             columns[key] = spectrum
-            geometries[key] = geometry
+            geometries[key] = batch.geometries[gname]
     return columns, geometries
+
+
+def _write_batch(path: Path, wavelength, batch: _Batch) -> str:
+    """Write a batch where users load large arrays, chosen by the suffix of ``path``:
+
+    * ``.nc`` (NetCDF) or ``.zarr``: an xarray Dataset, one variable per geometry (named as spelled,
+      ``/`` written ``_``: ``45_0``) with dims ``(sample, wavelength_nm)``, the varied fields as
+      coordinates along ``sample``;
+    * ``.npz``: arrays ``wavelength_nm``, ``fields`` (names), ``values`` ``(sample, field)`` and
+      one ``(sample, wl)`` array per geometry (keys ``reading_0``, …; names in ``geometries``);
+    * ``.npy``: the spectra alone, ``(geometry, sample, wl)``.
+    Returns a short description of what was written."""
+    suffix = path.suffix.lower()
+    n = batch.values.shape[0]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".npy":  # filled geometry by geometry: no second copy of the spectra in memory
+        out = np.lib.format.open_memmap(path, mode="w+", dtype=float, shape=(len(batch.spectra), n, np.size(wavelength)))
+        for i, g in enumerate(batch.spectra):
+            out[i] = batch.spectra[g]
+        out.flush()
+        return f"array (geometry, sample, wavelength) = {out.shape}"
+    described = f"{n} samples x {len(batch.spectra)} geometries"
+    if suffix == ".npz":
+        arrays = {f"reading_{i}": batch.spectra[g] for i, g in enumerate(batch.spectra)}
+        np.savez(path, wavelength_nm=np.asarray(wavelength, float), fields=np.asarray(batch.names),
+                 values=batch.values, geometries=np.asarray(list(batch.spectra)), **arrays)
+        return described
+    import xarray as xr
+
+    coords = {"wavelength_nm": ("wavelength_nm", np.asarray(wavelength, float))}
+    coords.update({name: ("sample", batch.values[:, j]) for j, name in enumerate(batch.names)})
+    data = {g.replace("/", "_"): (("sample", "wavelength_nm"), batch.spectra[g],
+                {"geometry": g, "quantity": batch.geometries[g].quantity_label}) for g in batch.spectra}
+    ds = xr.Dataset(data, coords=coords, attrs={"varied": " ".join(batch.names)})
+    if suffix == ".zarr":
+        ds.to_zarr(path, mode="w", consolidated=False)
+    else:
+        ds.to_netcdf(path, engine="h5netcdf")
+    return described
+
+
+#: Output formats of ``layerstack predict -o`` by suffix.
+OUTPUT_SUFFIXES = (".csv", ".nc", ".zarr", ".npz", ".npy")
 
 
 def _cmd_predict(args) -> int:
     start = time.perf_counter()
+    if Path(args.output).suffix.lower() not in OUTPUT_SUFFIXES:
+        raise LayerstackError(f"--output {args.output}: write one of {', '.join(OUTPUT_SUFFIXES)} "
+                              "(.nc, .zarr, .npz, .npy for --vary batches)")
+    if Path(args.output).suffix.lower() != ".csv" and not (args.vary or args.vary_table):
+        raise LayerstackError(f"--output {args.output}: a single stack's spectra are written as .csv; "
+                              ".nc, .zarr, .npz and .npy are for --vary/--vary-table batches")
     wavelength = parse_wavelengths(args.wavelengths)
     requested = _parse_geometries(args.geometry)
     with _precision(args.float32):
         stack = load_stack(args.stack)
         settings = load_instrument(args.stack)  # the stack file's [instrument], if any: each geometry takes its keys
         requested = [(name, instrument_geometry(g, settings, partial=True)) for name, g in requested]
-        ellipsometers = [instrument_geometry(Ellipsometric(angle, "psi"), settings, partial=True)
-                         for angle in args.ellipsometry or ()]
+        ellipsometers = [instrument_geometry(parse_geometry(f"ellipsometry:{angle!r}:psi"), settings, partial=True)
+                         for angle in args.ellipsometry or ()]  # parsed as spelled: radians are called out
         check_instrument_used(settings, [g for _, g in requested] + ellipsometers)
         try:
             check_stack(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
@@ -234,7 +317,13 @@ def _cmd_predict(args) -> int:
             raise LayerstackError("--polarization needs at least one brdf:I:V geometry")
         columns, geometries = {}, {}
         if args.vary or args.vary_table:
-            columns, geometries = _predict_batch(args, stack, wavelength, requested)
+            batch = _predict_batch(args, stack, wavelength, requested)
+            if Path(args.output).suffix.lower() != ".csv":
+                return _report_batch(args, start, wavelength, batch)
+            columns, geometries = _batch_columns(batch)
+            if len(columns) > CSV_MAX_COLUMNS:
+                raise LayerstackError(f"{args.output}: {len(columns)} spectra are too many for a CSV (at most "
+                                      f"{CSV_MAX_COLUMNS} columns); write .nc or .zarr (xarray), .npz or .npy")
             requested = []
         for name, geometry in requested:
             try:
@@ -283,6 +372,22 @@ def _cmd_predict(args) -> int:
         plot.parent.mkdir(parents=True, exist_ok=True)
         _plot(plot, wavelength, columns, geometries, title=Path(args.stack).name, subtitle=_describe(stack))
         print(f"{PROG}: wrote {plot} (plot of {len(columns)} spectr{'um' if len(columns) == 1 else 'a'})")
+    return 0
+
+
+def _report_batch(args, start: float, wavelength, batch: _Batch) -> int:
+    """Write a batch to .nc/.zarr/.npz/.npy and say what was written."""
+    what = _write_batch(Path(args.output), wavelength, batch)
+    spectra = list(batch.spectra.values())
+    bad = sum(int(np.sum(~np.isfinite(v))) for v in spectra)
+    if bad:
+        print(f"{PROG}: warning: {bad} non-finite values", file=sys.stderr)
+    lo, hi = min(np.nanmin(v) for v in spectra), max(np.nanmax(v) for v in spectra)
+    print(f"{PROG}: wrote {args.output} ({what}; {wavelength.size} wavelengths; values {lo:.4g}..{hi:.4g}) "
+          f"in {time.perf_counter() - start:.1f} s")
+    if args.plot:
+        print(f"{PROG}: warning: no plot written for a {batch.values.shape[0]}-sample batch (--plot draws up to 20 "
+              "spectra; use a .csv output for small batches)", file=sys.stderr)
     return 0
 
 

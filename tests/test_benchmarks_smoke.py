@@ -127,3 +127,14 @@ def test_ellipsometry_fit_runner_tiny():
                "versions": {"jax": "x", "scipy": "y"}, "pyelli": "z"}
     text = "\n".join(ellipsometry_fit.markdown(res, [res], machine, "up 1 day"))
     assert "| compile (first fit − median further fit) |" in text and "pyElli" in text
+
+
+@pytest.mark.slow
+def test_cli_predict_benchmark_tiny(tmp_path, monkeypatch):
+    """The command line and the library compute the same batch (difference exactly 0)."""
+    from benchmarks import cli_predict
+
+    monkeypatch.setattr(cli_predict, "RESULTS", tmp_path)
+    res = cli_predict.main(["--n", "12"])
+    assert res["max_abs_diff"] == 0.0
+    assert (tmp_path / "cli_predict.md").read_text().count("|") > 10

@@ -17,6 +17,9 @@ from .common import (
     check_range,
     error,
     read_text,
+    refuse_cut_number,
+    refuse_short_last_block,
+    to_float,
     unit_of,
     wavelength_to_nm,
 )
@@ -59,7 +62,7 @@ def read_accurion(path) -> Measurement:
             raise error(path, ui, f"column {need!r} is in {u!r}; degrees expected")
     roi = col.get("roiidx")
     zone = col.get("zone")
-    rows = []
+    rows, fields = [], []
     for i, line in enumerate(lines, start=1):
         if line.startswith("#") or not line.strip():
             continue
@@ -67,19 +70,26 @@ def read_accurion(path) -> Measurement:
         if len(tokens) < len(names):
             why = f"expected {len(names)} tab-separated fields, got {len(tokens)}"
             raise error(path, i, why + (" (truncated file?)" if i == len(lines) else ""))
-        try:
-            r = [float(tokens[col[k]]) for k in ("lambda", "aoi", "psi", "delta")]
-            r.append(float(tokens[roi]) if roi is not None else 0.0)
-            r.append(float(tokens[zone]) if zone is not None else 1.0)
-        except ValueError:
-            raise error(path, i, "lambda, AOI, psi, delta must be numbers") from None
+        wanted = [col[k] for k in ("lambda", "aoi", "psi", "delta")] + [k for k in (roi, zone) if k is not None]
+        bad = next((k for k in wanted if to_float(tokens[k]) is None), None)
+        if bad is not None:
+            raise error(path, i, f"column {bad + 1} ({names[bad]!r}): {tokens[bad]!r} is not a number")
+        r = [float(tokens[col[k]]) for k in ("lambda", "aoi", "psi", "delta")]
+        r.append(float(tokens[roi]) if roi is not None else 0.0)
+        r.append(float(tokens[zone]) if zone is not None else 1.0)
         check_angle(path, i, r[1])
         if not (math.isnan(r[2]) and math.isnan(r[3])):  # NaN, NaN: a zone that did not null
             check_range(path, i, "psi", r[2], 0.0, 90.0)
             check_range(path, i, "delta", r[3], -360.0, 360.0)
         rows.append(r)
+        fields.append((i, [t.strip() for t in tokens]))
     if not rows:
         raise error(path, len(lines), "no data rows")
+    refuse_cut_number(path, lines, fields[-1][0], fields[-1][1], [f for _, f in fields[:-1]], names)
+    points = np.array(rows)
+    refuse_short_last_block(path, points[:, 1], points[:, 0], fields[-1][0], inner_unit=lam_unit)
+    refuse_short_last_block(path, points[:, 0], points[:, 1], fields[-1][0], outer_name="wavelength",
+                            outer_unit=lam_unit, inner_name="angle", inner_unit="deg")
     a = np.array(rows)
     if np.unique(a[:, 4]).size > 1:
         raise error(path, None, f"the file holds {np.unique(a[:, 4]).size} regions of interest (ROIidx); export one")

@@ -5,6 +5,7 @@ number parsing, range checks, and the :class:`Format` record by which a reader r
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,7 +89,14 @@ def error(path, line: Optional[int], why: str) -> LayerstackError:
     return LayerstackError(f"{where}: {why}")
 
 
-def read_text(path) -> list[str]:
+class TextLines(list):
+    """The lines of a text file without their line ends (a ``list[str]``), and whether the file
+    ends with a line end (``complete``): a file cut while it was written usually does not."""
+
+    complete: bool = True
+
+
+def read_text(path) -> TextLines:
     """Lines of a text file (UTF-8, else Latin-1 as instruments on Windows write), without line ends."""
     path = Path(path)
     if not path.is_file():
@@ -100,7 +108,10 @@ def read_text(path) -> list[str]:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
-    return text.replace("\x1a", "").splitlines()
+    text = text.replace("\x1a", "")
+    lines = TextLines(text.splitlines())
+    lines.complete = not text.strip() or text.rstrip(" \t").endswith(("\n", "\r"))
+    return lines
 
 
 def to_float(token: str) -> Optional[float]:
@@ -143,6 +154,100 @@ def check_angle(path, line, value: float) -> None:
     if value >= 90.0:
         raise error(path, line, f"angle of incidence = {value!r} must be below 90 degrees")
 
+
+
+# ---------------------------------------------------------------------------------------------
+# missing values and truncated files
+# ---------------------------------------------------------------------------------------------
+#: Cells that say "no value here" (spreadsheets, R, pandas): read as NaN, masked per point.
+MISSING = frozenset({"", "nan", "na", "n/a", "#n/a", "null", "none", "-", "--"})
+
+
+def is_missing(token: str) -> bool:
+    """True for an empty cell or a spreadsheet's "no value" (``NaN``, ``NA``, ``#N/A`` …)."""
+    return token.strip().strip('"').strip().lower() in MISSING
+
+
+_DIGITS = re.compile(r"^[+-]?(\d*)(?:[.,](\d*))?(?:[eE]([+-]?\d*))?$")
+
+
+def _written_precision(token: str) -> Optional[tuple[int, int, int]]:
+    """(decimals, significant digits, exponent digits) of a number as written, or None."""
+    m = _DIGITS.match(token.strip())
+    if m is None or not (m.group(1) or m.group(2)):
+        return None
+    whole, frac, exp = m.group(1) or "", m.group(2) or "", m.group(3)
+    significant = (whole + frac).lstrip("0")
+    return len(frac), len(significant), -1 if exp is None else len(exp.lstrip("+-"))
+
+
+def refuse_cut_number(path, lines: TextLines, line: int, tokens: Sequence[str], earlier: Sequence[Sequence[str]],
+                      names: Optional[Sequence[str]] = None) -> None:
+    """Refuse a file that ends inside a number.
+
+    ``tokens`` are the fields of the last data row (line ``line``), ``earlier`` the fields of the
+    rows of the same kind before it. When the file does not end with a line end and the row's last
+    field is written with fewer decimals, significant or exponent digits than that field in every
+    earlier row (instruments write fixed precision), the writing was cut inside that number:
+    its value is wrong, so the file is refused naming the line and the column.
+    """
+    if lines.complete or not tokens or not earlier:
+        return
+    fewest = min(len(r) for r in earlier)
+    if len(tokens) < fewest:
+        raise error(path, line, f"the file ends inside this row: {len(tokens)} fields where every earlier row has "
+                                f"{fewest} or more (truncated file?)")
+    k = len(tokens) - 1
+    last = _written_precision(tokens[k])
+    others = [_written_precision(r[k]) for r in earlier[-50:] if len(r) > k]
+    if not others or any(o is None for o in others):
+        return
+    column = f"column {k + 1}" + (f" ({names[k]!r})" if names is not None and k < len(names) else "")
+    if last is None:  # a sign, a point or an 'e' alone
+        raise error(path, line, f"{column}: the file ends inside a number: {tokens[k]!r} (truncated file?)")
+    what = ("decimals", "significant digits", "exponent digits")
+    short = [i for i in range(3) if last[i] < min(o[i] for o in others)]
+    if short:
+        i = short[0]
+        raise error(
+            path, line,
+            f"{column}: the file ends inside a number: {tokens[k]!r} has {last[i]} {what[i]} where every earlier row "
+            f"has at least {min(o[i] for o in others)} (truncated file?; if the row is complete, end it with a line break)",
+        )
+
+
+def refuse_short_last_block(path, outer, inner, last_line: int, outer_name: str = "angle", outer_unit: str = "deg",
+                            inner_name: str = "wavelength", inner_unit: str = "nm") -> None:
+    """Refuse a file cut inside its last block: the points (``outer``, ``inner``) in file order
+    (e.g. angle, wavelength), grouped by ``outer``; when every other group holds the same set of
+    ``inner`` values and the group of the file's last row holds only the first of them, in the
+    file's order, the file was cut (one angle would silently cover a part of the range)."""
+    outer = np.round(np.asarray(outer, dtype=float), 9)
+    inner = np.round(np.asarray(inner, dtype=float), 9)
+    if outer.size < 2:
+        return
+    keys, first = np.unique(outer, return_index=True)
+    if keys.size < 2:
+        return
+    order = keys[np.argsort(first)]
+    last_key = outer[-1]
+    if last_key != order[-1]:
+        return
+    groups = {k: inner[outer == k] for k in order}
+    others = [groups[k] for k in order[:-1]]
+    ref = others[0]
+    if any(g.size != ref.size or not np.array_equal(np.sort(g), np.sort(ref)) for g in others[1:]):
+        return
+    last = groups[last_key]
+    if last.size >= ref.size or not np.array_equal(last, ref[: last.size]):
+        return
+    label = f"{outer_name} {last_key:g}" + (f" {outer_unit}" if outer_unit else "")
+    raise error(
+        path, last_line,
+        f"the file ends inside the block of {label}: {last.size} rows ({inner_name} {last.min():g}–{last.max():g} "
+        f"{inner_unit}) where every other {outer_name} has {ref.size} ({inner_name} {ref.min():g}–{ref.max():g} "
+        f"{inner_unit}): truncated file?",
+    )
 
 
 # ---------------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from .common import (
     check_angle,
     error,
     read_text,
+    refuse_cut_number,
     to_float,
     warn_implausible,
 )
@@ -22,12 +23,12 @@ from .common import (
 
 def _sentech_numbers(path, i, tokens: list[str]) -> list[float]:
     out = []
-    for t in tokens:
+    for k, t in enumerate(tokens):
         v = to_float(t)
         if v is None and "," in t and "." not in t:  # decimal comma (German locale exports)
             v = to_float(t.replace(",", "."))
         if v is None:
-            raise error(path, i, f"{t!r} is not a number")
+            raise error(path, i, f"{t!r} is not a number (column {k + 1})")
         out.append(v)
     return out
 
@@ -62,7 +63,7 @@ def read_sentech(path) -> Measurement:
         raise error(path, 1, "the header names no angle columns")
     for a in angles:
         check_angle(path, 1, a)
-    rows, row_lines = [], []
+    rows, row_lines, fields = [], [], []
     for i, line in enumerate(lines[1:], start=2):
         tokens = line.split()
         if not tokens:
@@ -77,8 +78,10 @@ def read_sentech(path) -> Measurement:
             )
         rows.append(nums)
         row_lines.append(i)
+        fields.append(tokens)
     if not rows:
         raise error(path, len(lines), "no data rows")
+    refuse_cut_number(path, lines, row_lines[-1], fields[-1], fields[:-1])
     a = np.array(rows)
     wl = a[:, 0]
     vals = a[:, 1:]

@@ -24,6 +24,8 @@ from .common import (
     error,
     numbers,
     read_text,
+    refuse_cut_number,
+    refuse_short_last_block,
     to_float,
     unit_of,
     wavelength_to_nm,
@@ -93,17 +95,23 @@ def read_woollam(path) -> Measurement:
     pd_rows: list[tuple[int, list[float]]] = []
     mm_rows: dict[str, list[tuple[int, list[float]]]] = {}
     extras: dict[str, list[list[float]]] = {}
+    extra_rows: dict[str, list[tuple[int, list[float]]]] = {}
+    rows_of_kind: dict[tuple, list[list[str]]] = {}  # the fields of every row, by label and length
+    last = None
     for i in range(start, len(lines) + 1):
         tokens = lines[i - 1].split()
         if not tokens:
             continue
+        kind = rows_of_kind.setdefault((tokens[0].lower() if to_float(tokens[0]) is None else None, len(tokens)), [])
+        kind.append(tokens)
+        last = (i, tokens, kind)
         label = None
         if to_float(tokens[0]) is None:
             label, tokens = tokens[0], tokens[1:]
         nums = numbers(tokens)
         if nums is None:
-            bad = next(t for t in tokens if to_float(t) is None)
-            raise error(path, i, f"{bad!r} is not a number")
+            k, bad = next((k, t) for k, t in enumerate(tokens) if to_float(t) is None)
+            raise error(path, i, f"{bad!r} is not a number (column {k + 1 + (label is not None)})")
         if label is None or label.lower() in _PSI_DELTA_LABELS:
             if len(nums) not in (4, 6):
                 raise error(
@@ -132,9 +140,21 @@ def read_woollam(path) -> Measurement:
             else:
                 label = "dPolE" if label.lower() == "dpole" else label
                 extras.setdefault(label, []).append(nums)
+                extra_rows.setdefault(label, []).append((i, nums))
     if pd_rows and any(len(r) != len(pd_rows[0][1]) for _, r in pd_rows):
         i = next(i for i, r in pd_rows if len(r) != len(pd_rows[0][1]))
         raise error(path, i, "rows mix 4 and 6 numbers (with and without sigma)")
+    if last is not None:
+        refuse_cut_number(path, lines, last[0], last[1], last[2][:-1])
+    blocks = [("angle", pd_rows)] if pd_rows else []
+    blocks += [("angle", rows) for rows in mm_rows.values()]
+    blocks += [(f"{label!r} rows' second column", rows) for label, rows in extra_rows.items()]
+    for name, rows in blocks:  # every kind of row on (wavelength, angle): the last block must be whole
+        a = np.array([r[:2] for _, r in rows])
+        wl = wavelength_to_nm(a[:, 0], unit)
+        refuse_short_last_block(path, a[:, 1], wl, rows[-1][0], outer_name=name, outer_unit="deg" if name == "angle" else "")
+        refuse_short_last_block(path, wl, a[:, 1], rows[-1][0], outer_name="wavelength", outer_unit="nm",
+                                inner_name=name, inner_unit="deg" if name == "angle" else "")
 
     title = header[0][1] if header and not header[0][1].lower().startswith("vasemethod") else ""
     meta = [("title", title)]

@@ -26,7 +26,9 @@ from .common import (
     check_angle,
     error,
     numbers,
+    is_missing,
     read_text,
+    refuse_cut_number,
     to_float,
     unit_of,
     warn_implausible,
@@ -119,6 +121,14 @@ def _csv_rows(path, lines: list[str]):
 
     rows = [(i, split(ln)) for i, ln in body[1:]]
     return hi, split(hline), rows, comments, delim
+
+
+def _number(token: str, *, decimal_comma: bool) -> Optional[float]:
+    """The number a cell spells; ``0,5`` too where the columns are not comma-separated."""
+    v = to_float(token)
+    if v is None and decimal_comma and token.count(",") == 1 and "." not in token:
+        v = to_float(token.replace(",", "."))
+    return v
 
 
 def read_measurement_csv(
@@ -225,22 +235,28 @@ def read_measurement_csv(
     used = {wl_col, ang_col, *value_col.values(), *sigma_col.values()}
     ignored = [header[k] for k in range(len(header)) if k not in used]
 
-    data = np.empty((len(rows), len(header)))
+    data = np.full((len(rows), len(header)), np.nan)
+    required = {wl_col, ang_col} - {None}
     for r, (i, fields) in enumerate(rows):
         if len(fields) != len(header):
-            raise error(
-                path, i,
-                f"{len(fields)} fields, the header has {len(header)}" + (" (truncated file?)" if i == len(lines) else ""),
-            )
-        for k, t in enumerate(fields):
-            v = to_float(t)
-            if v is None and delim == ";" and "," in t:
-                v = to_float(t.replace(",", "."))
+            hint = " (truncated file?)" if i == len(lines) and len(fields) < len(header) else ""
+            if delim == "," and len(fields) > len(header) and re.search(r"\d,\d", ",".join(fields)):
+                hint += " (decimal commas? they need ';' or tabs between the columns)"
+            raise error(path, i, f"{len(fields)} fields, the header has {len(header)}{hint}")
+        for k in sorted(used - {None}):
+            t = fields[k]
+            v = _number(t, decimal_comma=delim != ",")
+            if is_missing(t):
+                if k in required:
+                    raise error(path, i, f"column {header[k]!r} (column {k + 1}): no value ({t!r}); every row needs its "
+                                         f"{roles[k][0]}")
+                v = np.nan  # a missing point: NaN, masked per point (Measurement.valid)
             if v is None:
-                raise error(path, i, f"column {header[k]!r}: {t!r} is not a number")
+                raise error(path, i, f"column {header[k]!r}: {t!r} is not a number (column {k + 1})")
             data[r, k] = v
     if data.shape[0] == 0:
         raise error(path, len(lines), "a header but no data rows")
+    refuse_cut_number(path, lines, rows[-1][0], rows[-1][1], [f for _, f in rows[:-1]], header)
 
     def line_of(row):
         return rows[row][0]
@@ -272,7 +288,7 @@ def read_measurement_csv(
                 v /= 100.0
                 if s is not None:
                     s /= 100.0
-            elif np.nanmax(v) > 1.5:
+            elif np.any(np.isfinite(v)) and np.nanmax(v) > 1.5:
                 r = int(np.nanargmax(v))
                 raise error(
                     path, line_of(r),

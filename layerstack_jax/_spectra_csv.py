@@ -17,7 +17,7 @@ import numpy as np
 from ._readers.common import TextLines, is_missing, refuse_cut_number
 from ._validate import LayerstackError
 
-__all__ = ["read_csv_columns", "read_spectra_csv", "save_spectra_csv", "parse_values", "parse_wavelengths"]
+__all__ = ["read_csv_columns", "read_spectra_csv", "is_spectra_csv", "save_spectra_csv", "parse_values", "parse_wavelengths"]
 
 
 def delimiter_of(header: str) -> str:
@@ -150,6 +150,20 @@ def _rest(lines):
     out = TextLines(lines[1:])
     out.complete = getattr(lines, "complete", True)
     return out
+
+
+def is_spectra_csv(path) -> bool:
+    """True when the file's header is a spectra CSV's (:func:`read_spectra_csv`): ``wavelength_nm``
+    first (after R's unnamed row-name column), in any of the separators read. A file that cannot
+    be read, or whose header starts otherwise, answers False (it may be a measurement CSV)."""
+    try:
+        lines = content_lines(Path(path))
+    except LayerstackError:
+        return False
+    if not lines:
+        return False
+    names = [n.lower() for n in _fields(lines[0][1], delimiter_of(lines[0][1]))]
+    return bool(names) and (names[0] == "wavelength_nm" or (len(names) > 1 and names[0] == "" and names[1] == "wavelength_nm"))
 
 
 def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:

@@ -195,3 +195,25 @@ def test_range_restricts_the_files_wavelengths_without_resampling(tmp_path, caps
     assert "--range 800:900: no wavelength of the file in [800, 900] nm (it spans 400-700 nm)" in capsys.readouterr().err
     assert main(["fit", str(stack), str(data), "-g", "specular:0:T", "--range", "650:400", "-o", str(out)]) == 2
     assert "--range '650:400': give START:STOP in nm" in capsys.readouterr().err
+
+
+def test_fit_mueller_csv_not_normalised_is_divided_by_m11(tmp_path, capsys):
+    """The same Sentech matrix written as a measurement CSV scaled by an M11 of 0.3 (as a
+    non-normalising instrument reports it): the same thickness as the normalised file."""
+    from layerstack_jax import Measurement
+    from layerstack_jax.io import read_measurement, write_measurement_csv
+
+    m = read_measurement(DATA / "sentech_SiO2_on_Si_mueller_70deg.txt").between(400.0, 800.0)
+    scaled = Measurement(quantity="mueller", angles_deg=m.angles_deg, wavelength_nm=m.wavelength_nm,
+                         values=0.3 * np.asarray(m.values), mueller_normalized=False, file_format="csv")
+    data = write_measurement_csv(tmp_path / "mm.csv", scaled)
+    model = tmp_path / "sio2.toml"
+    model.write_text('[[layers]]\nname = "SiO2"\nn = { cauchy = [1.452, 0.0036] }\n'
+                     'thickness_nm = { value = 110, free = true, min = 50, max = 200 }\ncoherent = true\n\n'
+                     '[substrate]\nn = { material = "Si", source = "Aspnes" }\n')
+    d = {}
+    for name, path in (("normalised", DATA / "sentech_SiO2_on_Si_mueller_70deg.txt"), ("scaled", data)):
+        out = tmp_path / f"{name}.json"
+        assert main(["fit", str(model), str(path), "--range", "400:800", "-o", str(out)]) == 0, capsys.readouterr()
+        d[name] = json.loads(out.read_text())["fits"][0]["parameters"]["thickness_nm[SiO2]"]["value"]
+    assert d["scaled"] == pytest.approx(d["normalised"], abs=1e-6)

@@ -264,7 +264,8 @@ def read_measurement_csv(
     wl = wavelength_to_nm(data[:, wl_col], unit)
     if not np.all(np.isfinite(wl) & (wl > 0)):
         r = int(np.argmax(~(np.isfinite(wl) & (wl > 0))))
-        raise error(path, line_of(r), f"wavelength {data[r, wl_col]!r} {unit} is not a positive number")
+        raise error(path, line_of(r), f"wavelength {data[r, wl_col]!r} {unit} is not a positive number "
+                                         f"(column {wl_col + 1}, {header[wl_col]!r})")
     if ang_col is not None:
         ang_unit = roles[ang_col][2].lower()
         ang = np.rad2deg(data[:, ang_col]) if ang_unit.startswith("rad") else data[:, ang_col]
@@ -298,7 +299,8 @@ def read_measurement_csv(
         if quantity == "psi_delta" and n == "psi":
             bad = np.flatnonzero(~(np.isnan(v) | ((v >= 0) & (v <= 90))))
             if bad.size:
-                raise error(path, line_of(int(bad[0])), f"psi = {float(v[bad[0]])!r} is not in [0, 90] degrees")
+                raise error(path, line_of(int(bad[0])), f"psi = {float(v[bad[0]])!r} is not in [0, 90] degrees "
+                                                             f"(column {k + 1}, {header[k]!r})")
         comps[n], sig[n] = v, s
     sigma = sig if all(sig.get(n) is not None for n in names) else None
 

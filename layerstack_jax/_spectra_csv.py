@@ -15,6 +15,7 @@ from typing import Iterable, Mapping, Optional
 import numpy as np
 
 from ._readers.common import TextLines, is_missing, refuse_cut_number
+from ._readers.delimited import names_an_angle
 from ._validate import LayerstackError
 
 __all__ = ["read_csv_columns", "read_spectra_csv", "is_spectra_csv", "save_spectra_csv", "parse_values", "parse_wavelengths"]
@@ -154,8 +155,9 @@ def _rest(lines):
 
 def is_spectra_csv(path) -> bool:
     """True when the file's header is a spectra CSV's (:func:`read_spectra_csv`): ``wavelength_nm``
-    first (after R's unnamed row-name column), in any of the separators read. A file that cannot
-    be read, or whose header starts otherwise, answers False (it may be a measurement CSV)."""
+    first (after R's unnamed row-name column), in any of the separators read, and no angle column
+    (``angle``, ``aoi`` …: points at angles make a measurement CSV,
+    :func:`~layerstack_jax.io.read_measurement_csv`). A file that cannot be read answers False."""
     try:
         lines = content_lines(Path(path))
     except LayerstackError:
@@ -163,7 +165,8 @@ def is_spectra_csv(path) -> bool:
     if not lines:
         return False
     names = [n.lower() for n in _fields(lines[0][1], delimiter_of(lines[0][1]))]
-    return bool(names) and (names[0] == "wavelength_nm" or (len(names) > 1 and names[0] == "" and names[1] == "wavelength_nm"))
+    first = names[1] if len(names) > 1 and names[0] == "" else names[0] if names else ""
+    return first == "wavelength_nm" and not names_an_angle(names)
 
 
 def read_spectra_csv(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:

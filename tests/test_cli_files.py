@@ -217,3 +217,29 @@ def test_fit_mueller_csv_not_normalised_is_divided_by_m11(tmp_path, capsys):
         assert main(["fit", str(model), str(path), "--range", "400:800", "-o", str(out)]) == 0, capsys.readouterr()
         d[name] = json.loads(out.read_text())["fits"][0]["parameters"]["thickness_nm[SiO2]"]["value"]
     assert d["scaled"] == pytest.approx(d["normalised"], abs=1e-6)
+
+
+def test_fit_psi_delta_csv_with_an_angle_column_and_missing_points(tmp_path, capsys):
+    """A CSV 'wavelength_nm, angle, psi, delta' is a measurement (points at an angle), not three
+    spectra, even though it starts with wavelength_nm; its missing points are masked. Data: the
+    public forward model at 2.5 nm of SiO2 on Si, red to blue, a NaN ψ and an empty Δ."""
+    from layerstack_jax.io import load_stack
+
+    model = ROOT / "examples" / "sio2_on_si_fit.toml"
+    stack = load_stack(model)
+    stack = ls.Stack(stack.ambient, [ls.Layer(stack.layers[0].index, 2.5, name="SiO2")], stack.exit)
+    wl = np.arange(400.0, 801.0, 20.0)
+    e = ls.ellipsometry(stack, wl, 70.0)
+    psi, delta = np.asarray(e.psi_deg).ravel(), np.asarray(e.delta_deg).ravel()
+    cells = [[f"{w:g}", "70", repr(float(p)), repr(float(d))] for w, p, d in zip(wl, psi, delta)]
+    cells[4][2], cells[9][3] = "nan", ""
+    data = tmp_path / "pd.csv"
+    data.write_text("wavelength_nm,angle,psi,delta\n" + "\n".join(",".join(c) for c in cells[::-1]) + "\n")
+    out = tmp_path / "r.json"
+    code = main(["fit", str(model), str(data), "-o", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "geometry: ellipsometry:70:N,C,S" in text
+    fit = json.loads(out.read_text())["fits"][0]
+    assert fit["parameters"]["thickness_nm[SiO2]"]["value"] == pytest.approx(2.5, rel=1e-6)
+    assert fit["n_points"] == 3 * (wl.size - 2)

@@ -99,6 +99,12 @@ def _column_role(name: str, unit: str):
     return None, None
 
 
+def names_an_angle(header: list[str]) -> bool:
+    """True when a header names an angle-of-incidence column (``angle``, ``AOI (deg)``, ``theta`` …):
+    the table is then a measurement (points at angles), not one spectrum per column."""
+    return any(_column_role(*_split_header_name(h))[0] == "angle" for h in header)
+
+
 def _csv_rows(path, lines: list[str]):
     """(header_line_no, header_fields, [(line_no, fields)], comment_lines) of a delimited file."""
     comments, body = [], []

@@ -74,7 +74,7 @@ def test_measurement_csv_decimal_commas_between_commas_refused_by_name(tmp_path)
      r"line 3: column 'psi': '1l' is not a number \(column 3\)"),
     ("wavelength (nm),angle,psi,delta\n400,70,10.25,100.25\n410,70,10.50,101.25\n420,70,10.75,1",
      r"line 4: column 4 \('delta'\): the file ends inside a number: '1' has 0 decimals where every earlier row "
-     r"has at least 2 \(truncated file\?"),
+     r"has 2 \(truncated file\?"),
 ])
 def test_measurement_csv_errors_name_line_and_column(tmp_path, text, match):
     p = _write(tmp_path, "bad.csv", text)
@@ -113,7 +113,7 @@ def test_spectra_csv_descending_semicolon_decimal_comma(tmp_path):
     ("wavelength_nm,a\n400,0,10\n410,0,11\n", r"line 2: 3 fields for 2 columns \(wavelength_nm, a\) \(decimal commas\?"),
     ("wavelength_nm,a\n400,0.1000\n410,0.1100\n420,0.1",
      r"line 4: column 2 \('a'\): the file ends inside a number: '0.1' has 1 decimals where every earlier row has "
-     r"at least 4 \(truncated file\?"),
+     r"4 \(truncated file\?"),
     ("wavelength_nm,a,b\n400,0.1,0.2\n410,0.1", r"line 3: 2 fields for 3 columns \(wavelength_nm, a, b\) \(truncated file\?\)"),
 ])
 def test_spectra_csv_errors_name_line_and_column(tmp_path, text, match):
@@ -124,9 +124,12 @@ def test_spectra_csv_errors_name_line_and_column(tmp_path, text, match):
 
 
 def test_spectra_csv_complete_last_row_without_line_end_is_read(tmp_path):
-    """A last row written as precisely as the others is whole, line end or not."""
+    """A last row written as precisely as the others is whole, line end or not; so is one of a
+    file typed by hand (the earlier rows written with varying precision)."""
     wl, cols = read_spectra_csv(_write(tmp_path, "s.csv", "wavelength_nm,a\n400,0.1000\n410,0.1100\n420,0.1200"))
     np.testing.assert_array_equal(cols["a"], [0.1, 0.11, 0.12])
+    wl, cols = read_spectra_csv(_write(tmp_path, "t.csv", "wavelength_nm,a\n400,0.12\n410,0.125\n420,0.5"))
+    np.testing.assert_array_equal(cols["a"], [0.12, 0.125, 0.5])
 
 
 # ------------------------------------------------------------------------------------------

@@ -187,9 +187,11 @@ def refuse_cut_number(path, lines: TextLines, line: int, tokens: Sequence[str], 
 
     ``tokens`` are the fields of the last data row (line ``line``), ``earlier`` the fields of the
     rows of the same kind before it. When the file does not end with a line end and the row's last
-    field is written with fewer decimals, significant or exponent digits than that field in every
-    earlier row (instruments write fixed precision), the writing was cut inside that number:
-    its value is wrong, so the file is refused naming the line and the column.
+    field is written with fewer decimals, significant or exponent digits than that field in all
+    earlier rows — at least two sharing one precision (a fixed format), or at least twenty (an
+    instrument's export) — the writing was cut inside that number: its value is wrong, so the file
+    is refused naming the line and the column. A short file typed by hand, its numbers written
+    with varying precision, is not refused.
     """
     if lines.complete or not tokens or not earlier:
         return
@@ -206,14 +208,17 @@ def refuse_cut_number(path, lines: TextLines, line: int, tokens: Sequence[str], 
     if last is None:  # a sign, a point or an 'e' alone
         raise error(path, line, f"{column}: the file ends inside a number: {tokens[k]!r} (truncated file?)")
     what = ("decimals", "significant digits", "exponent digits")
-    short = [i for i in range(3) if last[i] < min(o[i] for o in others)]
-    if short:
-        i = short[0]
-        raise error(
-            path, line,
-            f"{column}: the file ends inside a number: {tokens[k]!r} has {last[i]} {what[i]} where every earlier row "
-            f"has at least {min(o[i] for o in others)} (truncated file?; if the row is complete, end it with a line break)",
-        )
+    if len(others) < 2:
+        return
+    for i in range(3):  # a precision every earlier row shares (a fixed format), or at least, in a long file
+        written = {o[i] for o in others}
+        if last[i] < min(written) and (len(written) == 1 or len(others) >= 20):
+            raise error(
+                path, line,
+                f"{column}: the file ends inside a number: {tokens[k]!r} has {last[i]} {what[i]} where every earlier "
+                f"row has {'' if len(written) == 1 else 'at least '}{min(written)} (truncated file?; if the row is "
+                "complete, end it with a line break)",
+            )
 
 
 def refuse_short_last_block(path, outer, inner, last_line: int, outer_name: str = "angle", outer_unit: str = "deg",

@@ -200,6 +200,8 @@ def refuse_cut_number(path, lines: TextLines, line: int, tokens: Sequence[str], 
         raise error(path, line, f"the file ends inside this row: {len(tokens)} fields where every earlier row has "
                                 f"{fewest} or more (truncated file?)")
     k = len(tokens) - 1
+    if is_missing(tokens[k]):  # an empty last cell: a missing point, masked, never misread
+        return
     last = _written_precision(tokens[k])
     others = [_written_precision(r[k]) for r in earlier[-50:] if len(r) > k]
     if not others or any(o is None for o in others):

@@ -26,9 +26,12 @@ def _add_fit_parser(sub) -> None:
         "the report(s) and writes the results as JSON.",
     )
     p.add_argument("stack", metavar="STACK.toml", help="stack file with free parameters")
-    p.add_argument("data", metavar="DATA", help="measured spectra: a CSV (wavelength_nm, then one column per spectrum) "
-                   "or an instrument file (Woollam .dat, Sentech .txt, Accurion, NeXus .nxs, JCAMP-DX): geometry and "
-                   "angles then come from the file")
+    p.add_argument("data", metavar="DATA", help="measured spectra: a CSV (wavelength_nm, then one column per spectrum; "
+                   "comma-, semicolon- or tab-separated, decimal commas with the latter two; empty, NaN or NA cells are "
+                   "missing points, left out of the fit; wavelengths increasing or decreasing) or an instrument file "
+                   "(Woollam .dat, Sentech .txt, Accurion, NeXus .nxs, JCAMP-DX, a measurement CSV): geometry and "
+                   "angles then come from the file; psi/Delta and Mueller-matrix files are fitted (a Mueller matrix by "
+                   "the six elements an isotropic sample sets: -M12, -M21 as N, M33, M44 as C, M34, -M43 as S)")
     p.add_argument("--geometry", "-g", metavar="GEOM",
                    help="measurement geometry of the spectra (see `layerstack predict -h`); needed unless every data "
                         "column is named by its geometry (e.g. 45/0): there is no default")
@@ -36,6 +39,8 @@ def _add_fit_parser(sub) -> None:
     p.add_argument("--plot", metavar="OUT.png", help="also plot data vs fit with residuals (PNG)")
     p.add_argument("--wavelengths", "-w", metavar="GRID",
                    help="model grid (default: the data's wavelengths); data are resampled onto it, never extrapolated")
+    p.add_argument("--range", metavar="START:STOP", dest="wl_range",
+                   help="fit only the file's wavelengths in [START, STOP] nm (its own points, not resampled)")
     p.add_argument("--sigma", type=float, metavar="S",
                    help="standard deviation of every data point (absolute uncertainties); default: scale by reduced chi2")
     p.add_argument("--method", default="lm", choices=("lm", "gauss-newton", "dogleg", "bfgs", "lbfgsb", "trf"),
@@ -195,8 +200,52 @@ def _measurement_datasets(m, args, kind: Optional[str] = None) -> tuple[list, st
         label = "specular:" + ",".join(f"{a:g}" for a in m.angles_deg) + f":{q}"
         origin = "from the file"
     else:
-        raise LayerstackError(f"{args.data}: fitting a {m.quantity} measurement from the command line is not supported "
-                              "yet (psi/Delta, reflectance and transmittance are); fit it in Python with fitting.Dataset")
+        datasets, label, origin = _mueller_datasets(m, args, name)
+    return datasets, label, origin
+
+
+#: The elements of a normalised Mueller matrix that an isotropic sample's reading determines,
+#: each as (element, Ellipsometric quantity, sign): in the instruments' frame
+#: (:mod:`layerstack_jax._polarimetry`) M/M11 = [[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]],
+#: N, C, S the (depolarized, where the model is) reading of :class:`~layerstack_jax.Ellipsometric`.
+_MUELLER_NCS = (("M12", "N", -1.0), ("M21", "N", -1.0), ("M33", "C", 1.0), ("M44", "C", 1.0),
+                ("M34", "S", 1.0), ("M43", "S", -1.0))
+#: The other elements, fixed for an isotropic sample: not fitted, their deviation reported.
+_MUELLER_FIXED = {"M13": 0.0, "M14": 0.0, "M22": 1.0, "M23": 0.0, "M24": 0.0, "M31": 0.0, "M32": 0.0, "M41": 0.0,
+                  "M42": 0.0}
+
+
+def _mueller_datasets(m, args, name: str) -> tuple[list, str, str]:
+    """Datasets of a Mueller-matrix file: the six elements an isotropic stack's reading sets
+    (:data:`_MUELLER_NCS`: −M12 and −M21 as N, M33 and M44 as C, M34 and −M43 as S), one dataset
+    per element and angle with the file's σ, each point masked where the file has no value.
+    A matrix not normalised by the file is divided by M11 (σ too)."""
+    import fitting
+    from layerstack_jax import Ellipsometric
+
+    arrays = m.to_arrays()
+    if not m.mueller_normalized:
+        m11 = arrays["M11"]
+        if np.any(np.isfinite(m11) & (m11 <= 0)):
+            raise LayerstackError(f"{args.data}: M11 <= 0 in a Mueller matrix (the reflected intensity)")
+        with np.errstate(invalid="ignore"):
+            arrays = {k: (v / m11 if k[:1] == "M" or k.startswith("sigma_") else v) for k, v in arrays.items()}
+    datasets = []
+    for i, angle in enumerate(np.asarray(m.angles_deg, float)):
+        for element, q, sign in _MUELLER_NCS:
+            y = sign * arrays[element][i]
+            ok = np.isfinite(y)
+            sq = arrays.get(f"sigma_{element}")
+            sigma = args.sigma if args.sigma is not None else (
+                None if sq is None else np.where(ok, np.maximum(np.abs(sq[i]), 1e-6), 1.0))
+            datasets.append(fitting.Dataset(Ellipsometric(angle, q), np.where(ok, y, 0.0), sigma=sigma, mask=ok,
+                                            name=f"{name} {'-' if sign < 0 else ''}{element} as {q} {angle:g} deg"))
+    fixed = np.concatenate([(arrays[k] - v).ravel() for k, v in _MUELLER_FIXED.items()])
+    fixed = fixed[np.isfinite(fixed)]
+    label = "ellipsometry:" + ",".join(f"{a:g}" for a in m.angles_deg) + ":N,C,S"
+    origin = ("from the file's Mueller matrix: -M12, -M21 fitted as N, M33, M44 as C, M34, -M43 as S; the other nine "
+              "elements (0, and M22 = 1, for an isotropic sample) are not fitted: their rms deviation from those values "
+              f"is {np.sqrt(np.mean(fixed ** 2)) if fixed.size else float('nan'):.3g}")
     return datasets, label, origin
 
 
@@ -210,6 +259,9 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
                               "instrument file (all its angles are fitted together)")
     if args.geometry is not None:
         raise LayerstackError(f"{args.data}: the file says how it was measured; -g is for CSV spectra")
+    if args.wl_range is not None:  # --range: the file's own points, not resampled
+        _in_range(m.wavelength_nm, args)
+        m = m.between(*_parse_range(args.wl_range))
     grid = np.asarray(m.wavelength_nm, float) if args.wavelengths is None else parse_wavelengths(args.wavelengths)
     with _precision(args.float32):
         import fitting
@@ -245,16 +297,48 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
 
 
 def _read_spectra(path):
-    """``(wavelength_nm, columns)`` when ``path`` is a spectra CSV (``wavelength_nm`` then one
-    column per spectrum), else None (an instrument file); the file is read once."""
-    from layerstack_jax.io import read_spectra_csv, sniff_format
+    """``(wavelength_nm, columns)`` when ``path`` is a spectra CSV (header ``wavelength_nm``, then
+    one column per spectrum; a missing value is NaN), else None (an instrument file or a
+    measurement CSV, for :func:`~layerstack_jax.io.read_measurement`). The file is read once, and
+    a file that fails its reader fails with that reader's message (file, line, column, why)."""
+    from layerstack_jax.io import is_spectra_csv, read_spectra_csv, sniff_format
 
-    if sniff_format(path) != "csv":
+    if sniff_format(path) != "csv" or not is_spectra_csv(path):
         return None
+    return read_spectra_csv(path)
+
+
+def _parse_range(text) -> tuple[float, float]:
+    """``--range START:STOP`` in nm: two finite numbers, START < STOP."""
+    parts = str(text).split(":")
     try:
-        return read_spectra_csv(path)
-    except LayerstackError:
-        return None
+        lo, hi = (float(p) for p in parts)
+    except ValueError:
+        lo = hi = float("nan")
+    if len(parts) != 2 or not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi):
+        raise LayerstackError(f"--range {text!r}: give START:STOP in nm, 0 <= START < STOP (e.g. 400:820)")
+    return lo, hi
+
+
+def _in_range(wl, args) -> np.ndarray:
+    """Boolean ``(wl,)``: the file's wavelengths kept by ``--range`` (all without it)."""
+    wl = np.asarray(wl, float)
+    if args.wl_range is None:
+        return np.ones(wl.shape, bool)
+    lo, hi = _parse_range(args.wl_range)
+    keep = (wl >= lo) & (wl <= hi)
+    if not keep.any():
+        raise LayerstackError(f"{args.data}: --range {args.wl_range}: no wavelength of the file in [{lo:g}, {hi:g}] nm "
+                              f"(it spans {wl.min():g}-{wl.max():g} nm)")
+    return keep
+
+
+def _resample_masked(resample, wl, y, mask, grid, what):
+    """Spectra with missing points on another grid: a model point is used only when both
+    neighbouring data points are (values NaN elsewhere); ``(values, mask)``."""
+    values = resample(wl, np.where(mask, y, 0.0), grid, what=what)
+    used = resample(wl, mask.astype(float), grid, what=what) > 1 - 1e-12
+    return np.where(used, values, np.nan), used
 
 
 def _cmd_fit(args) -> int:
@@ -269,6 +353,8 @@ def _cmd_fit(args) -> int:
     if spectra is None:
         return _cmd_fit_measurement(args, read_measurement(args.data), start)
     data_wl, columns = spectra
+    keep = _in_range(data_wl, args)  # --range: the file's own points, not resampled
+    data_wl, columns = data_wl[keep], {n: v[keep] for n, v in columns.items()}
     if args.residuals is not None:
         raise LayerstackError(f"{args.data}: --residuals applies to psi/Delta instrument files; for CSV spectra name "
                               "the quantity in the geometry (e.g. -g ellipsometry:70:rho_re)")
@@ -295,18 +381,23 @@ def _cmd_fit(args) -> int:
                 raise LayerstackError(f"{args.data}: no column {args.background!r} (--background); columns: {', '.join(names)}")
             names = [n for n in names if n != args.background]
         Y = np.stack([columns[n] for n in names])
+        used = np.isfinite(Y)  # missing points (NaN, NA, empty cells) are masked, point by point
+        bg = None if args.background is None else columns[args.background]
+        bg_used = None if bg is None else np.isfinite(bg)
         own_grid = None if args.wavelengths is None else data_wl
         if own_grid is not None:  # every mode resamples the data onto the model grid (never extrapolates)
-            Y = fitting.resample(own_grid, Y, grid, what=args.data)
-            if args.background is not None:
-                columns[args.background] = fitting.resample(own_grid, columns[args.background][None], grid,
-                                                            what=args.data)[0]
+            Y, used = _resample_masked(fitting.resample, own_grid, Y, used, grid, args.data)
+            if bg is not None:
+                bg, bg_used = _resample_masked(fitting.resample, own_grid, bg, bg_used, grid, args.data)
 
-        def objective(rows):
-            ds = [fitting.Dataset(geometry, rows, sigma=args.sigma, name=Path(args.data).name)]
-            if args.background is not None:
-                ds.append(fitting.Dataset(geometry, columns[args.background], sigma=args.sigma,
-                                          name=f"{args.background} (bare background)", bare=True))
+        def dataset(y, mask, **kw):
+            return fitting.Dataset(geometry, np.where(mask, y, 0.0), sigma=args.sigma,
+                                   mask=None if mask.all() else mask, **kw)
+
+        def objective(rows, mask):
+            ds = [dataset(rows, mask, name=Path(args.data).name)]
+            if bg is not None:
+                ds.append(dataset(bg, bg_used, name=f"{args.background} (bare background)", bare=True))
             try:
                 return fitting.Objective(stack, grid, ds, params, n_samples=rows.shape[0], nodes=args.nodes)
             except LayerstackError as e:
@@ -314,24 +405,37 @@ def _cmd_fit(args) -> int:
 
         results, skipped = [], []
         if args.joint:
-            obj = objective(Y)
+            obj = objective(Y, used)
             results.append(("+".join(names), fitting.fit(obj, args.method, starts=args.starts, max_steps=args.max_steps)))
         else:
             if any(p.per_sample for p in params):
                 raise LayerstackError(f"{args.stack}: per_sample parameters need --joint")
-            obj = objective(Y[:1])
-            if args.starts == 1 and args.method not in fitting.HOST_METHODS:
-                # all columns in one compiled, vmapped solve
-                batch = fitting.fit_batch(obj, Y, args.method, max_steps=args.max_steps, full_results=True)
-                invalid = dict(getattr(batch, "invalid_data", None) or {})
-                for i, (name, r) in enumerate(zip(names, batch.results)):
-                    if r is None:  # this column's data failed the checks: flagged, the batch went on
-                        skipped.append((name, invalid.get(i, "invalid data")))
-                    else:
-                        results.append((name, r))
-            else:  # multi-start or a host solver: one fit per column, one compiled solver for all
-                results.extend((name, fitting.fit(obj, args.method, data=[y[None]], starts=args.starts,
-                                                  max_steps=args.max_steps)) for name, y in zip(names, Y))
+            fitted, why_not = {}, {}
+            # one objective per pattern of missing points (one for a file without missing points)
+            for pattern in np.unique(used, axis=0)[::-1]:
+                idx = [i for i in range(len(names)) if np.array_equal(used[i], pattern)]
+                if not pattern.any():
+                    why_not.update((i, "no measured point (every value missing)") for i in idx)
+                    continue
+                obj = objective(Y[idx[:1]], pattern[None])
+                rows = np.where(pattern, Y[idx], 0.0)
+                if args.starts == 1 and args.method not in fitting.HOST_METHODS:
+                    # all columns in one compiled, vmapped solve
+                    batch = fitting.fit_batch(obj, rows, args.method, max_steps=args.max_steps, full_results=True)
+                    invalid = dict(getattr(batch, "invalid_data", None) or {})
+                    for k, (i, r) in enumerate(zip(idx, batch.results)):
+                        if r is None:  # this column's data failed the checks: flagged, the batch went on
+                            why_not[i] = invalid.get(k, "invalid data")
+                        else:
+                            fitted[i] = r
+                else:  # multi-start or a host solver: one fit per column, one compiled solver for all
+                    fitted.update((i, fitting.fit(obj, args.method, data=[y[None]], starts=args.starts,
+                                                  max_steps=args.max_steps)) for i, y in zip(idx, rows))
+            results = [(names[i], fitted[i]) for i in sorted(fitted)]
+            skipped = [(names[i], why_not[i]) for i in sorted(why_not)]
+            if not results:
+                raise LayerstackError(f"{args.data}: no column could be fitted: "
+                                      + "; ".join(f"{n}: {w}" for n, w in skipped))
     header = [f"geometry: {geometry.label} ({geometry.quantity_label}; {geometry_origin})",
               f"sigma: {_sigma_origin(args)}"]
     print("\n".join(header))

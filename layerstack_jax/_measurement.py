@@ -1,6 +1,6 @@
 r"""The measurement object: what an instrument file says, in the library's units.
 
-Every reader of :mod:`layerstack_jax._readers` returns one :class:`Measurement`. It holds a
+Every reader of :mod:`layerstack_jax._readers` (one module per file format) returns one :class:`Measurement`. It holds a
 rectangular grid of angles of incidence × wavelengths and, at every grid point, the measured
 quantity:
 
@@ -14,7 +14,9 @@ quantity:
 The axes follow the library: angles first, wavelength last (as
 :func:`~layerstack_jax.ellipsometry` returns ``psi_deg`` ``(ang, wl)`` and
 :func:`~layerstack_jax.specular_mueller` returns ``(ang, 4, 4, wl)``). Grid points the file
-does not contain are NaN in ``values`` (and ``sigma``); :meth:`Measurement.valid` says which.
+does not contain, and the cells it leaves empty (or writes as ``NaN``, ``NA``), are NaN in ``values``
+(and ``sigma``): :meth:`Measurement.valid` is the per-point mask a fit uses (``layerstack fit``
+passes it as ``fitting.Dataset(mask=…)``, so missing points are left out, point by point).
 
 Conventions ("converted at the door"): wavelengths in nm (files in Å, µm, eV or cm⁻¹ are
 converted), angles in degrees, reflectance/transmittance as fractions (files in % are divided

@@ -174,6 +174,7 @@ from ._readers import read_woollam as read_woollam
 from ._readers import sniff_format as sniff_format
 from ._readers import wavelength_to_nm as wavelength_to_nm
 from ._readers import write_measurement_csv as write_measurement_csv
+from ._spectra_csv import is_spectra_csv as is_spectra_csv
 from ._spectra_csv import parse_values as parse_values
 from ._spectra_csv import parse_wavelengths as parse_wavelengths
 from ._spectra_csv import read_csv_columns as read_csv_columns
@@ -205,6 +206,7 @@ __all__ = [
     "check_instrument_used",
     "read_csv_columns",
     "read_spectra_csv",
+    "is_spectra_csv",
     "save_spectra_csv",
     "parse_values",
     "parse_wavelengths",

@@ -41,7 +41,7 @@ def _add_fit_cube_parser(sub) -> None:
         "converged, bands_used, status and others. A pixel's bad bands (NaN, saturated, below -K sigma) are left "
         "out of its fit; status: 0 fitted, 1 outside the mask, 2/3/4 too few usable bands (NaN, saturated, far "
         "below zero), and, for fits made but not to be trusted as they are (values kept in the maps): 5 "
-        "implausible chi2 (with --sigma: above the upper edge of the central 99.9%% of the chi2 distribution of "
+        "implausible chi2 (with --sigma: above the upper edge of the central 99.9% of the chi2 distribution of "
         "its degrees of freedom), 6 a parameter on a bound, 7 not converged. "
         "A store of the same job is resumed (regions already written are skipped: a killed command, started "
         "again, goes on); --restart overwrites it. Progress (pixels, rate, ETA) is shown on stderr and logged "

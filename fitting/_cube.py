@@ -98,7 +98,8 @@ from ._objective import Objective
 from ._results import linearised_covariance
 from ._solve import require_compiled_method
 
-__all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
+__all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
+           "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
            "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER"]
 
 log = logging.getLogger("fitting.cube")
@@ -709,5 +710,25 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
                 cluster.close()
     if report is not None and not pending:
         report(total)
-    log.info("fit_cube: %s complete (%d pixels) in %.3g s", out, total, time.perf_counter() - t_start)
-    return xr.open_zarr(out, consolidated=False)
+    maps = xr.open_zarr(out, consolidated=False)
+    counts = status_counts(maps)
+    log.info("fit_cube: %s complete (%d pixels) in %.3g s; status: %s", out, total, time.perf_counter() - t_start,
+             ", ".join(f"{CUBE_STATUS[c]} {k}" for c, k in counts.items() if k))
+    flagged = {c: counts[c] for c in (5, 6, 7) if counts[c]}
+    if flagged:
+        warnings.warn(f"fit_cube: {sum(flagged.values())} pixel fit(s) not to be trusted as they are ("
+                      + ", ".join(f"{k} {CUBE_STATUS[c]} (status {c})" for c, k in flagged.items())
+                      + "): their values are in the maps, their 'status' is not 0", stacklevel=2)
+    return maps
+
+
+def status_counts(maps) -> dict:
+    """``{code: pixels}`` of every :data:`CUBE_STATUS` code in the ``status`` map of ``maps``
+    (counted chunk by chunk: bounded memory)."""
+    import dask.array as da
+
+    status = maps["status"].data
+    status = status if isinstance(status, da.Array) else da.from_array(np.asarray(status))
+    codes = sorted(CUBE_STATUS)
+    found = da.bincount((status.astype(np.int16) - codes[0]).ravel(), minlength=len(codes)).compute()
+    return {c: int(found[i]) for i, c in enumerate(codes)}

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -413,12 +414,14 @@ def _cmd_fit_cube(args) -> int:
         t0 = time.perf_counter()
         try:
             chunk = args.chunk if args.chunk == "auto" else (args.chunk, args.chunk)
-            maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=chunk,
-                                    saturation=args.saturation, negative_sigmas=args.negative_sigmas,
-                                    method=args.method, chunk_size=args.batch,
-                                    client=args.scheduler, n_workers=args.workers, resume=not args.restart,
-                                    progress=not args.quiet, allow_degenerate=args.allow_degenerate,
-                                    max_steps=args.max_steps)
+            with warnings.catch_warnings():  # the summary below says it, with the counts
+                warnings.filterwarnings("ignore", message=r"fit_cube: \d+ pixel fit\(s\) not to be trusted")
+                maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=chunk,
+                                        saturation=args.saturation, negative_sigmas=args.negative_sigmas,
+                                        method=args.method, chunk_size=args.batch,
+                                        client=args.scheduler, n_workers=args.workers, resume=not args.restart,
+                                        progress=not args.quiet, allow_degenerate=args.allow_degenerate,
+                                        max_steps=args.max_steps)
         except LayerstackError as e:  # fit_cube's hints name its keywords: say the command's options
             msg = str(e)
             for keyword, option in _OPTIONS.items():

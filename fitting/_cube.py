@@ -23,8 +23,8 @@ fitting — and writes maps into a zarr store, region by region:
   reading scatters around 0, and one below −5σ is not noise — the library's own rule for a
   :class:`~fitting.Dataset`; σ is the dataset's σ of that band, or without σ the library's
   absolute floor :data:`~fitting._objective.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
-  zero but above that floor are data and are fitted (dropping them would bias a dark region's
-  map upwards). A pixel's bad bands are left out of *its* fit only (weight 0 on those residuals:
+  zero but above that floor are data and are fitted (dropping them would leave the least dark
+  pixels of a dark region: its map biased thin). A pixel's bad bands are left out of *its* fit only (weight 0 on those residuals:
   one compiled shape for every pixel; the ``bands_used`` map counts the others, and its degrees
   of freedom ν = ``bands_used`` − free parameters). A pixel is fitted when ν ≥ 1; else it gets
   NaN values and status 2, 3 or 4 after the most frequent reason. Outside the user ``mask``:

@@ -134,3 +134,21 @@ def test_negative_sigmas_zero_drops_every_reading_below_zero(objective, tmp_path
     good = np.sum(np.isfinite(CUBE) & (CUBE >= 0), axis=-1)
     np.testing.assert_array_equal(maps["bands_used"].values, good)
     assert np.all(np.isin(maps["status"].values, fitting.FIT_MADE))
+
+
+def test_batch_args_take_a_masked_array_as_a_mask_per_fit(objective):
+    """:meth:`fitting.Objective.batch_args` of a masked array: the masked points of one fit get
+    weight 0 (data 0) and are not checked (NaN, -0.5); the other fits keep every weight."""
+    data = np.stack([NOISY[0, 0], NOISY[0, 1], NOISY[0, 2]])
+    data[1, 3], data[2, 7] = np.nan, -0.5
+    masked = np.ma.MaskedArray(data, mask=~np.isfinite(data) | (data < -0.1))
+    (ys, ws), n = objective.batch_args([masked])
+    w, y = np.asarray(ws[0])[:, 0], np.asarray(ys[0])[:, 0]
+    assert n == 3 and w.shape == y.shape == (3, WL.size)
+    expected = np.full((3, WL.size), 1.0 / SIGMA)
+    expected[1, 3] = expected[2, 7] = 0.0
+    np.testing.assert_array_equal(w, expected)
+    assert y[1, 3] == 0.0 and y[2, 7] == 0.0
+    np.testing.assert_array_equal(y[0], data[0])
+    with pytest.raises(ls.LayerstackError, match="NaN or infinite data"):
+        objective.batch_args([data])  # the same data unmasked

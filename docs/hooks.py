@@ -13,7 +13,7 @@ import io
 import os
 import re
 
-_MARKER = re.compile(r"^<!-- help: layerstack((?: [a-z]+)*) -->$", re.MULTILINE)
+_MARKER = re.compile(r"^<!-- help: layerstack((?: [a-z][a-z-]*)*) -->$", re.MULTILINE)
 
 
 def help_text(argv: list[str]) -> str:

@@ -37,6 +37,8 @@ from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
 from ._cube import CUBE_STATUS as CUBE_STATUS
+from ._cube import FIT_MADE as FIT_MADE
+from ._cube import NEGATIVE_SIGMAS as NEGATIVE_SIGMAS
 from ._cube import cube_regions as cube_regions
 from ._cube import fit_cube as fit_cube
 from ._design import ColourTarget as ColourTarget
@@ -85,6 +87,8 @@ __all__ = [
     "fit_cube",
     "cube_regions",
     "CUBE_STATUS",
+    "FIT_MADE",
+    "NEGATIVE_SIGMAS",
     "Dataset",
     "Objective",
     "resample",

@@ -140,7 +140,7 @@ class BatchResult:
 
 
 def _rows(data, n):
-    return [np.asarray(d)[n] for d in data]
+    return [d[n] if np.ma.isMaskedArray(d) else np.asarray(d)[n] for d in data]  # a per-fit mask kept
 
 
 def _screen(objective: Objective, data):

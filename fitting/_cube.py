@@ -17,14 +17,34 @@ fitting — and writes maps into a zarr store, region by region:
   it overwrites completely: no pixel is lost or fitted twice, and the maps are bit-identical
   to those of an uninterrupted run (each pixel's fit depends on its spectrum only; the same
   compiled solver runs on the same padded shapes).
-* pixels are fitted only where the spectrum is usable: inside the user ``mask``, finite at every
-  band the dataset uses, below ``saturation`` and not negative. The others get NaN values and a
-  ``status`` code saying why (:data:`CUBE_STATUS`).
+* **bad bands, not bad pixels**: at each pixel, a band the dataset uses is *bad* when its
+  reading is NaN or infinite, at or above ``saturation``, or further below zero than
+  ``negative_sigmas`` × σ (:data:`NEGATIVE_SIGMAS` = 5 by default: a dark, dark-corrected
+  reading scatters around 0, and one below −5σ is not noise — the library's own rule for a
+  :class:`~fitting.Dataset`; σ is the dataset's σ of that band, or without σ the library's
+  absolute floor :data:`~fitting._objective.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
+  zero but above that floor are data and are fitted (dropping them would leave the least dark
+  pixels of a dark region: its map biased thin). A pixel's bad bands are left out of *its* fit only (weight 0 on those residuals:
+  one compiled shape for every pixel; the ``bands_used`` map counts the others, and its degrees
+  of freedom ν = ``bands_used`` − free parameters). A pixel is fitted when ν ≥ 1; else it gets
+  NaN values and status 2, 3 or 4 after the most frequent reason. Outside the user ``mask``:
+  status 1.
+* **honest pixels**: a fit made gets status 0 ("fitted") only when it is trustworthy; else,
+  with its values kept in the maps, the first that applies of: 7 the solver did not converge;
+  5 *implausible χ²* — with σ given, χ² above the upper edge of the central
+  :data:`CHI2_CENTRAL` = 99.9 % of the χ² distribution of ν degrees of freedom (upper-tail
+  probability < 0.05 %): a local minimum or a wrong model (a good pixel lands there once in
+  2000); 6 a parameter on a bound (within 1e-6 of its scale, :func:`fitting._statistics.bound_contacts`):
+  the optimum may lie beyond it. A χ² below the lower edge (σ overstated: the standard errors
+  are too large, the values are not wrong) keeps status 0 and is counted by the command line.
+  Without σ, χ² is a sum of squared residuals and is not tested.
 * maps: one per free parameter component (its name in :attr:`fitting.BatchResult.names`,
   made safe for zarr), its standard error (``<name>_stderr``), ``chi2``, ``reduced_chi2``,
   ``num_steps``, ``converged``, ``result_code``, ``rank`` of the normalised Jacobian and
   ``identifiable`` (rank = number of free parameters: the pixel's *identifiability verdict*;
-  where it is 0, the stderr of the parameters involved are NaN) and ``status``.
+  where it is 0, the stderr of the parameters involved are NaN), ``bands_used`` and ``status``.
+  ``reduced_chi2`` = χ²/ν with each pixel's own ν; without σ, the standard errors are scaled by
+  it (σ estimated from that pixel's residuals).
 * before any pixel is fitted, the objective is checked for a degeneracy *by construction*: the
   thickness and α of the same incoherent layer both free (Beer: only α·h enters, Simonot
   eq. 20) — refused unless ``allow_degenerate=True`` (then warned once) — and the rank of the
@@ -78,20 +98,34 @@ from ._objective import Objective
 from ._results import linearised_covariance
 from ._solve import require_compiled_method
 
-__all__ = ["fit_cube", "CUBE_STATUS", "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
+__all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
+           "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
            "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER"]
 
 log = logging.getLogger("fitting.cube")
 
-#: ``status`` codes of the pixel maps of :func:`fit_cube` (dimensionless integers).
+#: ``status`` codes of the pixel maps of :func:`fit_cube` (dimensionless integers). 2, 3, 4:
+#: not fitted, too few usable bands (the most frequent reason named); 5, 6, 7: fitted, values
+#: in the maps, but not to be trusted as they are (module docstring).
 CUBE_STATUS = {
     -1: "not fitted yet",
     0: "fitted",
     1: "outside the mask",
     2: "no data (NaN or infinite values)",
     3: "saturated",
-    4: "negative values",
+    4: "far below zero",
+    5: "implausible chi2",
+    6: "parameter on a bound",
+    7: "not converged",
 }
+#: Status codes of the pixels whose fit was made (values in the maps).
+FIT_MADE = (0, 5, 6, 7)
+#: Readings down to −NEGATIVE_SIGMAS × σ are kept as noise around a dark reading (default of
+#: ``fit_cube(negative_sigmas=)``; at most this: the library's :class:`~fitting.Dataset` check).
+NEGATIVE_SIGMAS = 5.0
+#: With σ given, a pixel's χ² above the upper edge of this central fraction of the χ²(ν)
+#: distribution marks it "implausible chi2" (status 5).
+CHI2_CENTRAL = 0.999
 
 _MARKERS = ".regions"  # suffix of the marker directory beside the store
 
@@ -279,19 +313,43 @@ class _Settings:
     used_bands: Optional[np.ndarray]
     fit_options: tuple
     x64: bool
+    floor: Optional[np.ndarray] = None  # (wl,) readings below it are bad bands; None: none are
+    sigma_given: bool = False
 
 
-def _pixel_status(block: np.ndarray, user_mask: Optional[np.ndarray], s: _Settings) -> np.ndarray:
-    """``status`` code of every pixel of a region block ``(ry, rx, wl)`` (:data:`CUBE_STATUS`)."""
-    used = block if s.used_bands is None else block[..., s.used_bands]
+def _negative_floor(objective: Objective, k: float) -> np.ndarray:
+    """``(wl,)`` the lowest reading kept at each band: −k σ (σ of the dataset's band), or without σ
+    −k/5 × :data:`~fitting._objective.NEGATIVE_READING_FLOOR` (the library's floor is 5 "σ");
+    computed as the :class:`~fitting.Dataset` check computes −5σ, so that k = 5 is its rule."""
+    from ._objective import NEGATIVE_READING_FLOOR
+
+    w = np.asarray(objective.args()[1][0], dtype=float).reshape(-1)
+    if objective.sigma_given:
+        with np.errstate(divide="ignore"):
+            return np.where(w > 0, -float(k) / np.where(w > 0, w, 1.0), -np.inf)
+    return np.full(w.shape, -float(k) / NEGATIVE_SIGMAS * NEGATIVE_READING_FLOOR)
+
+
+def _pixel_status(block: np.ndarray, user_mask: Optional[np.ndarray], s: _Settings, n_free: int = 0) -> tuple:
+    """``(status, bad)`` of a region block ``(ry, rx, wl)``: the ``status`` code of every pixel
+    (0 where it is to be fitted; :data:`CUBE_STATUS`) and the boolean ``(ry, rx, wl)`` bad bands
+    (used bands that are NaN/infinite, saturated or below the floor), left out of each pixel's fit.
+    A pixel is fitted when more than ``n_free`` used bands are good."""
+    used = np.ones(block.shape[-1], bool) if s.used_bands is None else np.asarray(s.used_bands, bool)
+    nonfinite = ~np.isfinite(block) & used
+    with np.errstate(invalid="ignore"):
+        saturated = (block >= s.saturation) & used & ~nonfinite if s.saturation is not None else \
+            np.zeros(block.shape, bool)
+        below = (block < s.floor) & used & ~nonfinite if s.floor is not None else np.zeros(block.shape, bool)
+    bad = nonfinite | saturated | below
+    good = np.sum(used & ~bad, axis=-1)
     status = np.zeros(block.shape[:2], np.int8)
-    status[np.any(used < 0, axis=-1)] = 4
-    if s.saturation is not None:
-        status[np.any(used >= s.saturation, axis=-1)] = 3
-    status[~np.all(np.isfinite(used), axis=-1)] = 2
+    few = good <= n_free
+    counts = np.stack([nonfinite.sum(-1), saturated.sum(-1), below.sum(-1)])  # ties: the first reason
+    status[few] = (2 + np.argmax(counts, axis=0).astype(np.int8))[few]
     if user_mask is not None:
         status[~user_mask] = 1
-    return status
+    return status, bad
 
 
 def _empty_maps(shape: tuple, names: tuple) -> dict:
@@ -302,7 +360,7 @@ def _empty_maps(shape: tuple, names: tuple) -> dict:
     for n in ("chi2", "reduced_chi2"):
         maps[n] = np.full(shape, np.nan)
     for n, dt in (("num_steps", np.int32), ("result_code", np.int16), ("rank", np.int16), ("converged", np.int8),
-                  ("identifiable", np.int8)):
+                  ("identifiable", np.int8), ("bands_used", np.int16)):
         maps[n] = np.full(shape, -1, dt)
     maps["status"] = np.full(shape, -1, np.int8)
     return maps
@@ -316,17 +374,36 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
         jax.config.update("jax_enable_x64", s.x64)
     data = np.asarray(getattr(block, "values", block), dtype=np.float64)
     mask = None if user_mask is None else np.asarray(getattr(user_mask, "values", user_mask), dtype=bool)
-    status = _pixel_status(data, mask, s)
+    n_free = len(s.names)
+    status, bad = _pixel_status(data, mask, s, n_free)
     maps = _empty_maps(status.shape, s.names)
-    maps["status"] = status
     valid = np.nonzero(status.ravel() == 0)[0]
     if valid.size:
         spectra = data.reshape(-1, data.shape[-1])[valid]
+        dropped = bad.reshape(-1, data.shape[-1])[valid]
         pad = -valid.size % s.chunk_size  # same padded shape in every region: one compiled solver
         if pad:
             spectra = np.concatenate([spectra, np.broadcast_to(spectra[:1], (pad, spectra.shape[1]))])
+            dropped = np.concatenate([dropped, np.broadcast_to(dropped[:1], (pad, dropped.shape[1]))])
+        # bad bands: weight 0 in this pixel's fit (the same compiled shape for every pixel)
+        spectra = np.ma.MaskedArray(np.where(dropped, 0.0, spectra), mask=dropped)
         r = fit_batch(objective, spectra, s.method, chunk_size=s.chunk_size, progress=False, **dict(s.fit_options))
-        n_free = r.x.shape[1]
+        used = np.ones(data.shape[-1], bool) if s.used_bands is None else np.asarray(s.used_bands, bool)
+        bands = np.sum(used & ~dropped, axis=-1)
+        dof = bands - n_free
+        # the batch's statistics count every used band; each pixel has its own ν
+        with np.errstate(invalid="ignore", divide="ignore"):
+            reduced = np.where(dof > 0, r.chi2 / np.maximum(dof, 1), np.nan)
+            stderr = r.stderr * (np.sqrt(r.dof / np.maximum(dof, 1))[:, None] if r.covariance_scaled else 1.0)
+        verdict = np.zeros(dof.shape, np.int8)
+        if s.sigma_given:
+            from scipy.stats import chi2 as chi2_distribution
+
+            tail = chi2_distribution.sf(r.chi2, np.maximum(dof, 1))
+            verdict[~(tail >= (1.0 - CHI2_CENTRAL) / 2)] = 5  # NaN χ² too
+        if r.at_bound is not None:
+            verdict[(verdict == 0) & np.any(r.at_bound, axis=1)] = 6
+        verdict[~r.converged] = 7
 
         def put(name, values):
             flat = maps[name].reshape(-1)
@@ -334,14 +411,17 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
 
         for j, n in enumerate(s.names):
             put(_var(n), r.x[:, j])
-            put(_var(n) + "_stderr", r.stderr[:, j])
+            put(_var(n) + "_stderr", stderr[:, j])
         put("chi2", r.chi2)
-        put("reduced_chi2", r.reduced_chi2)
+        put("reduced_chi2", reduced)
         put("num_steps", r.num_steps)
         put("result_code", r.result_code)
         put("rank", r.rank)
         put("converged", r.converged.astype(np.int8))
         put("identifiable", (r.rank == n_free).astype(np.int8))
+        put("bands_used", bands.astype(np.int16))
+        status.reshape(-1)[valid] = verdict[:valid.size]
+    maps["status"] = status
     _write_region(s.out, maps, ys, xs)
     _mark_done(s.out, iy, ix)
     return {"region": (iy, ix), "pixels": int(status.size), "fitted": int(valid.size),
@@ -454,7 +534,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
              saturation: Optional[float] = None, method: str = "lm", chunk_size: int = 128, client=None,
              n_workers: int = 2, resume: bool = True, progress: Union[bool, Callable[[int, int], None]] = True,
              allow_degenerate: bool = False, wavelength_nm=None, variable: Optional[str] = None,
-             memory: Optional[int] = None, **fit_options):
+             memory: Optional[int] = None, negative_sigmas: float = NEGATIVE_SIGMAS, **fit_options):
     """Fit every pixel of ``cube`` with ``objective`` and write the maps to the zarr store ``out``
     (module docstring).
 
@@ -468,7 +548,11 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         chunk: region size (rows, columns) in pixels: the unit of work, of writing and of
             resuming; or ``"auto"`` (default): sized from the workers' memory (:func:`auto_region`),
             or, resuming a store, the store's own region size.
-        saturation: values >= this at a used band mark a pixel saturated (not fitted).
+        saturation: a reading >= this is a bad band of its pixel (left out of its fit).
+        negative_sigmas: k, readings below zero are kept down to −k σ (σ of the dataset's band;
+            without σ, k/5 × 0.01 absolute); further below they are bad bands of their pixel.
+            0 ≤ k ≤ :data:`NEGATIVE_SIGMAS` (5, the default: the :class:`~fitting.Dataset`
+            check refuses a reading below −5σ); 0 drops every reading below zero.
         method, chunk_size, fit_options: passed to :func:`~fitting.fit_batch` (``chunk_size``
             fits per compiled call; options e.g. ``max_steps``, ``rtol``, ``scale_covariance``).
         client: None (this process), ``"processes"`` (a LocalCluster of ``n_workers``), a
@@ -484,7 +568,10 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         :class:`xarray.Dataset` (lazy, opened from ``out``): maps ``(y, x)`` of every free
         parameter component (its own unit: nm, 1/nm, dimensionless) and ``<name>_stderr``,
         ``chi2``, ``reduced_chi2``, ``num_steps``, ``converged``, ``result_code``, ``rank``,
-        ``identifiable``, ``status`` (:data:`CUBE_STATUS`); attributes name the parameters and
+        ``identifiable``, ``bands_used``, ``status`` (:data:`CUBE_STATUS`: 0 only for a
+        trustworthy fit, 5/6/7 for fits made but implausible, on a bound or not converged);
+        attributes name the parameters, state the rules (``negative_sigmas``,
+        ``chi2_central``) and
         record the region size (``chunk``, ``chunk_size``, and for ``"auto"`` ``chunk_sizing``:
         the budget and the measured bytes it came from).
     """
@@ -506,6 +593,12 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
     require_compiled_method("fit_cube", method)
     if memory is not None and not (isinstance(memory, (int, np.integer)) and memory >= 1):
         raise LayerstackError(f"fit_cube: memory must be a number of bytes >= 1, got {memory!r}")
+    k = negative_sigmas
+    if isinstance(k, bool) or not isinstance(k, (int, float, np.integer, np.floating)) or \
+            not 0.0 <= float(k) <= NEGATIVE_SIGMAS:
+        raise LayerstackError(f"fit_cube: negative_sigmas must be a number from 0 to {NEGATIVE_SIGMAS:g} (readings "
+                              f"below -{NEGATIVE_SIGMAS:g} sigma are refused by the Dataset check), got {k!r}")
+    negative_sigmas = float(k)
     if mask is not None:
         mask = np.asarray(getattr(mask, "values", mask))
         if mask.dtype != bool or mask.shape != (ny, nx):
@@ -550,10 +643,12 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
                      "budget %s (fits %d pixels)", chunk[0], chunk[1], len(cube_regions((ny, nx), chunk)), slots,
                      chunk_size, sizing["solver_bytes"] / 1e6, sizing["per_pixel_bytes"] / 1e3,
                      sizing["budget_source"], sizing["memory_fit_pixels"])
-        fp = _fingerprint(objective, cube, chunk, method, chunk_size, saturation, mask, fit_opts)
+        fp = _fingerprint(objective, cube, chunk, method, chunk_size, (saturation, negative_sigmas), mask, fit_opts)
         attrs = {"fit_cube_job": fp, "parameters": json.dumps(list(names)),
                  "parameter_variables": json.dumps([_var(n) for n in names]), "method": method,
                  "status_codes": json.dumps({str(k): v for k, v in CUBE_STATUS.items()}),
+                 "negative_sigmas": negative_sigmas, "chi2_central": CHI2_CENTRAL,
+                 "sigma_given": int(objective.sigma_given),
                  "chunk": json.dumps(list(chunk)), "chunk_size": int(chunk_size),
                  "chunk_sizing": json.dumps(sizing if sizing is not None else "given"),
                  "source": str(cube.attrs.get("source", "array"))}
@@ -572,7 +667,8 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
             log.info("fit_cube: resuming %s: %d of %d regions already written", out, len(regions) - len(pending),
                      len(regions))
         settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
-                             bool(jax.config.jax_enable_x64))
+                             bool(jax.config.jax_enable_x64), _negative_floor(objective, negative_sigmas),
+                             bool(objective.sigma_given))
         report = reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
         t0 = time.perf_counter()
         done0 = done_px
@@ -614,5 +710,25 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
                 cluster.close()
     if report is not None and not pending:
         report(total)
-    log.info("fit_cube: %s complete (%d pixels) in %.3g s", out, total, time.perf_counter() - t_start)
-    return xr.open_zarr(out, consolidated=False)
+    maps = xr.open_zarr(out, consolidated=False)
+    counts = status_counts(maps)
+    log.info("fit_cube: %s complete (%d pixels) in %.3g s; status: %s", out, total, time.perf_counter() - t_start,
+             ", ".join(f"{CUBE_STATUS[c]} {k}" for c, k in counts.items() if k))
+    flagged = {c: counts[c] for c in (5, 6, 7) if counts[c]}
+    if flagged:
+        warnings.warn(f"fit_cube: {sum(flagged.values())} pixel fit(s) not to be trusted as they are ("
+                      + ", ".join(f"{k} {CUBE_STATUS[c]} (status {c})" for c, k in flagged.items())
+                      + "): their values are in the maps, their 'status' is not 0", stacklevel=2)
+    return maps
+
+
+def status_counts(maps) -> dict:
+    """``{code: pixels}`` of every :data:`CUBE_STATUS` code in the ``status`` map of ``maps``
+    (counted chunk by chunk: bounded memory)."""
+    import dask.array as da
+
+    status = maps["status"].data
+    status = status if isinstance(status, da.Array) else da.from_array(np.asarray(status))
+    codes = sorted(CUBE_STATUS)
+    found = da.bincount((status.astype(np.int16) - codes[0]).ravel(), minlength=len(codes)).compute()
+    return {c: int(found[i]) for i, c in enumerate(codes)}

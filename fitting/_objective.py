@@ -483,17 +483,23 @@ class Objective:
     def batch_args(self, data):
         """Args for many independent fits: ``data`` is one array per dataset shaped
         ``(N, samples, wl)`` (or ``(N, wl)`` for one sample); checked in bulk like
-        :meth:`args`. Returns ``(data, weight)`` with a leading axis N on every array."""
+        :meth:`args`. Returns ``(data, weight)`` with a leading axis N on every array.
+
+        An array may be a :class:`numpy.ma.MaskedArray`: its masked points are left out of
+        that fit only (not checked, weight 0), on top of the dataset's own mask — a per-fit
+        band mask (:func:`~fitting.fit_cube` drops a pixel's bad bands so)."""
         if not isinstance(data, (list, tuple)):
             data = [data]
         if len(data) != len(self.datasets):
             raise LayerstackError(f"data: give one array per dataset ({len(self.datasets)})")
         ys, ws, n = [], [], None
         for i, (ds, y) in enumerate(zip(self.datasets, data)):
-            y = np.asarray(y, dtype=float)
+            dropped = np.ma.getmaskarray(y) if np.ma.isMaskedArray(y) else None
+            y = np.asarray(np.ma.getdata(y), dtype=float)
             k = self.samples_of(i)
             if y.ndim == 2 and k == 1:
                 y = y[:, None, :]
+                dropped = None if dropped is None else dropped[:, None, :]
             if y.ndim != 3 or y.shape[1] != k:
                 raise LayerstackError(
                     f"dataset {i} ({ds.label}): batch data must be shaped (N, {k}, wl), got {y.shape}"
@@ -504,9 +510,12 @@ class Objective:
                 raise LayerstackError(f"dataset {i} ({ds.label}): {y.shape[0]} fits, dataset 0 has {n}")
             mask = None if ds.colour is not None else self._mask[i] if ds.wavelength_nm is None else ds.mask
             mask_n = None if mask is None else np.broadcast_to(np.asarray(mask), y.shape[1:])
+            mask_all = None if mask_n is None else np.tile(mask_n, (n, 1))
+            if dropped is not None:
+                keep = ~dropped.reshape(-1, y.shape[-1])
+                mask_all = keep if mask_all is None else mask_all & keep
             flat = dataclasses.replace(
-                ds, data=y.reshape(-1, y.shape[-1]),
-                mask=None if mask_n is None else np.tile(mask_n, (n, 1)),
+                ds, data=y.reshape(-1, y.shape[-1]), mask=mask_all,
                 sigma=None if ds.sigma is None or np.ndim(ds.sigma) < 2 else np.tile(np.asarray(ds.sigma, float), (n, 1)),
                 weights=None if ds.weights is None or np.ndim(ds.weights) < 2
                 else np.tile(np.asarray(ds.weights, float), (n, 1)),
@@ -515,9 +524,10 @@ class Objective:
                 flat = dataclasses.replace(flat, sigma=ds.sigma)
             if ds.weights is not None and np.ndim(ds.weights) < 2:
                 flat = dataclasses.replace(flat, weights=ds.weights)
-            yy, _, _ = _prepare(flat, self.wavelength, None, i)
+            yy, _, used = _prepare(flat, self.wavelength, None, i)
             ys.append(jnp.asarray(yy.reshape(n, k, -1)))
-            ws.append(jnp.broadcast_to(self._weight[i], (n,) + self._weight[i].shape))
+            w = jnp.broadcast_to(self._weight[i], (n,) + self._weight[i].shape)
+            ws.append(w if dropped is None else jnp.where(jnp.asarray(used.reshape(w.shape)), w, 0.0))
         return (tuple(ys), tuple(ws)), n
 
     def samples_of(self, i: int) -> int:

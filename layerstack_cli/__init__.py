@@ -13,8 +13,9 @@ Unlike the library, the command line enables float64 (``jax_enable_x64``) unless
 is given, and restores the previous setting when it returns (so ``main`` can be called
 in-process). It also keeps the programs it compiles on disk (JAX's persistent compilation
 cache, in ``$LAYERSTACK_CACHE_DIR`` or ``~/.cache/layerstack/xla``; ``LAYERSTACK_CACHE_DIR=`` turns
-it off), so a later run of the same model structure does not compile them again. ``fit`` and ``fit-cube`` exit with status 1 when a fit (a fitted pixel) did not
-converge (the report says why);
+it off), so a later run of the same model structure does not compile them again. ``fit`` exits with status 1 when the fit did not converge (the report says why), ``fit-cube``
+when a pixel's fit is not to be trusted (not converged, χ² implausible, a parameter on a bound:
+its status map says which);
 ``design`` exits with status 1 when the design misses a target (or the required yield) — it
 still writes the best design found, and the report says which target failed; a design that
 meets every target exits 0 even if the optimizer hit its step limit. Input problems (bad stack

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,8 @@ _UNITS = {"thickness": "nm", "alpha": "1/nm", "rho_g": "dimensionless", "n": "di
           "coefficient": "dimensionless"}
 
 #: fit_cube's keywords named in its messages -> the options of this command.
-_OPTIONS = {"resume=False": "--restart", "allow_degenerate=True": "--allow-degenerate"}
+_OPTIONS = {"resume=False": "--restart", "allow_degenerate=True": "--allow-degenerate",
+            "negative_sigmas": "--negative-sigmas"}
 
 _MASK_FORMATS = ".npy (2-D array), .zarr (a store holding one 2-D variable) or an ENVI .hdr of one band"
 
@@ -37,12 +39,17 @@ def _add_fit_cube_parser(sub) -> None:
         description="Fit the parameters declared free in the stack file (as for `layerstack fit`) to every pixel "
         "spectrum of a cube (ENVI .hdr, .zarr, NetCDF .nc, HDF5 .h5, or .npy with -w), region by region, into the "
         "zarr store OUT: one map per free parameter, its standard error (<name>_stderr), chi2, reduced_chi2, "
-        "converged, status (0 fitted, 1 outside the mask, 2 no data (NaN), 3 saturated, 4 negative) and others. "
+        "converged, bands_used, status and others. A pixel's bad bands (NaN, saturated, below -K sigma) are left "
+        "out of its fit; status: 0 fitted, 1 outside the mask, 2/3/4 too few usable bands (NaN, saturated, far "
+        "below zero), and, for fits made but not to be trusted as they are (values kept in the maps): 5 "
+        "implausible chi2 (with --sigma: above the upper edge of the central 99.9% of the chi2 distribution of "
+        "its degrees of freedom), 6 a parameter on a bound, 7 not converged. "
         "A store of the same job is resumed (regions already written are skipped: a killed command, started "
         "again, goes on); --restart overwrites it. Progress (pixels, rate, ETA) is shown on stderr and logged "
         "to OUT.log.",
-        epilog="exit status: 0 when every fitted pixel converged, 1 when some did not (the maps are written; the "
-        "'converged' map says which), 2 for an input error (one line naming the file or key). Quick-look PNGs go "
+        epilog="exit status: 0 when every pixel fit made is trustworthy (status 0), 1 when some is not (status 5, 6 "
+        "or 7: the maps are written; the 'status' map says which), 2 for an input error (one line naming the file "
+        "or key). Quick-look PNGs go "
         "to --quicklook DIR, by default OUT_quicklook/ beside the store (OUT without .zarr): one per map, with "
         "its colour bar in the parameter's unit (nm, 1/nm, dimensionless), colours spanning the 1st-99th "
         "percentile.",
@@ -68,7 +75,13 @@ def _add_fit_cube_parser(sub) -> None:
     p.add_argument("--sigma", type=float, metavar="S",
                    help="standard deviation of every data point; default: none given (chi2 maps are then sums of "
                         "squared residuals, and the standard errors are scaled by each pixel's reduced chi2)")
-    p.add_argument("--saturation", type=float, metavar="V", help="values >= V at a used band mark a pixel saturated")
+    p.add_argument("--saturation", type=float, metavar="V",
+                   help="a reading >= V is a bad band of its pixel (left out of that pixel's fit)")
+    p.add_argument("--negative-sigmas", type=float, default=5.0, metavar="K",
+                   help="readings below zero down to -K sigma are kept as noise around a dark reading (sigma: "
+                        "--sigma; without it K/5 x 0.01 absolute); further below they are bad bands of their pixel, "
+                        "left out of its fit. 0 <= K <= 5; default 5 (the library's own check); 0 drops every "
+                        "reading below zero")
     p.add_argument("--wavelengths", "-w", metavar="GRID",
                    help="band centres in nm (start:stop:step or a comma list) for an .npy cube, which has none")
     p.add_argument("--variable", metavar="NAME", help="the cube's variable in a zarr/NetCDF file holding several")
@@ -225,30 +238,47 @@ def _units(objective, maps) -> dict:
     return {variables[name]: _UNITS.get(kind, "unit of the stack file") for name, kind in kinds.items()}
 
 
-def _summary(maps, sigma_given: bool, dof: int, seconds: float, processed: int) -> list[str]:
-    """The end-of-run table: pixels fitted / masked / no data / converged / not, median reduced
-    chi2 and (with σ given) the fits whose χ² is implausible for ``dof`` degrees of freedom, time
-    and rate."""
+def _summary(maps, sigma_given: bool, bands: int, n_free: int, seconds: float, processed: int) -> list[str]:
+    """The end-of-run table: pixels per status (fitted, outside the mask, too few usable bands,
+    and the fits made but flagged: implausible chi2, on a bound, not converged), pixels fitted
+    with some bands left out, median reduced chi2, χ² below its distribution's central 99.9 %
+    (σ given), time and rate. ``bands``: the bands a pixel's fit uses when none is bad;
+    ``n_free``: free parameters (a pixel's degrees of freedom: ``bands_used`` − ``n_free``)."""
+    from fitting import FIT_MADE
+
     status = np.asarray(maps["status"].values)
-    converged = np.asarray(maps["converged"].values)
-    ok = status == 0
-    rows = [("pixels", status.size), ("fitted", int(ok.sum())), ("outside the mask", int((status == 1).sum())),
-            ("no data (NaN/inf)", int((status == 2).sum())), ("saturated", int((status == 3).sum())),
-            ("negative values", int((status == 4).sum())), ("converged", int((converged[ok] == 1).sum())),
-            ("NOT converged", int((converged[ok] != 1).sum()))]
+    made = np.isin(status, FIT_MADE)
+    count = {c: int((status == c).sum()) for c in range(-1, 8)}
+    rows = [("pixels", status.size), ("fitted", count[0]), ("outside the mask", count[1]),
+            ("no data (NaN/inf)", count[2]), ("saturated", count[3]), ("far below zero", count[4]),
+            ("implausible chi2", f"{count[5]}" + (" (chi2 above the central 99.9% of its distribution: a local "
+                                                   "minimum or a wrong model; values kept, see reduced_chi2)"
+                                                   if count[5] else "" if sigma_given
+                                                   else " (no --sigma: chi2 not tested)")),
+            ("on a bound", f"{count[6]}" + (" (a parameter at its min or max: the optimum may lie beyond)"
+                                            if count[6] else "")),
+            ("NOT converged", count[7])]
+    if count[-1]:
+        rows.append(("not fitted yet", count[-1]))
+    if "bands_used" in maps and made.any():
+        rows.append(("fits with bad bands left out", int(np.sum(np.asarray(maps["bands_used"].values)[made] < bands))))
     if "identifiable" in maps:
-        rows.append(("not identifiable", int((np.asarray(maps["identifiable"].values)[ok] == 0).sum())))
-    if ok.any():
-        chi = np.asarray(maps["reduced_chi2"].values)[ok]
+        rows.append(("not identifiable", int((np.asarray(maps["identifiable"].values)[made] == 0).sum())))
+    if made.any():
+        chi = np.asarray(maps["reduced_chi2"].values)[made]
         med = f"{np.nanmedian(chi):.4g}" if np.isfinite(chi).any() else "n/a"
         rows.append(("median reduced chi2", med if sigma_given else f"{med} (no --sigma: not a test of the fit)"))
-        if sigma_given and dof > 0:
+        if sigma_given and "bands_used" in maps:
             from scipy.stats import chi2 as chi2_distribution
 
-            p = chi2_distribution.sf(np.asarray(maps["chi2"].values)[ok], dof)
-            rows.append(("implausible fits", f"{int(np.sum(p < 1e-6))} (chi2 beyond its p = 1e-6 tail for {dof} "
-                                             "degrees of freedom: a local minimum or a wrong model; see the "
-                                             "reduced_chi2 map)"))
+            from fitting._cube import CHI2_CENTRAL
+
+            nu = np.asarray(maps["bands_used"].values)[made] - n_free
+            low = chi2_distribution.cdf(np.asarray(maps["chi2"].values)[made], np.maximum(nu, 1)) \
+                < (1.0 - CHI2_CENTRAL) / 2
+            if low.any():
+                rows.append(("chi2 too small", f"{int(low.sum())} (below the central 99.9%: --sigma larger than the "
+                                               "scatter of the data? standard errors too large)"))
     rows.append(("pixels done this run", processed))
     rows.append(("time (this run)", f"{seconds:.1f} s"))
     rows.append(("pixels/s (this run)", f"{processed / seconds:.4g}" if seconds > 0 else "n/a"))
@@ -258,15 +288,18 @@ def _summary(maps, sigma_given: bool, dof: int, seconds: float, processed: int) 
 
 def _quicklook(maps, directory: Path, units: dict, title: str) -> list[Path]:
     """One PNG per map (parameters, their standard errors, reduced chi2, status), each with its
-    colour bar labelled in the map's unit; returns the files written."""
+    colour bar labelled in the map's unit; returns the files written. Parameters and standard
+    errors are shown where the status is 0 (fitted), reduced chi2 wherever a fit was made (the
+    flagged pixels stand out there); other pixels are grey."""
     from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.figure import Figure
 
-    from fitting import CUBE_STATUS
+    from fitting import CUBE_STATUS, FIT_MADE
 
     directory.mkdir(parents=True, exist_ok=True)
+    status = np.asarray(maps["status"].values)
     plots = []
     for var, unit in units.items():
         plots.append((var, f"{var} ({unit})"))
@@ -284,7 +317,8 @@ def _quicklook(maps, directory: Path, units: dict, title: str) -> list[Path]:
     for var, label in plots:
         if var not in maps:
             continue
-        values = np.asarray(maps[var].values, dtype=float)
+        shown = np.isin(status, FIT_MADE) if var == "reduced_chi2" else status == 0
+        values = np.where(shown, np.asarray(maps[var].values, dtype=float), np.nan)
         fig, ax = figure()
         cmap = colormaps["viridis"].with_extremes(bad="0.75")  # pixels not fitted: grey
         finite = values[np.isfinite(values)]
@@ -295,17 +329,19 @@ def _quicklook(maps, directory: Path, units: dict, title: str) -> list[Path]:
         fig.colorbar(im, ax=ax, label=label, extend="both")
         ax.set_xlabel("x (column)")
         ax.set_ylabel("y (row)")
-        ax.set_title(f"{title}\n{var} (grey: not fitted)", fontsize=9)
+        grey = "no fit made" if var == "reduced_chi2" else "not fitted, or flagged (status map)"
+        ax.set_title(f"{title}\n{var} (grey: {grey})", fontsize=9)
         path = directory / f"{var}.png"
         fig.savefig(path)
         written.append(path)
     # status: categorical
     codes = sorted(CUBE_STATUS)
     fig, ax = figure()
-    colours = ["0.9", "tab:green", "0.5", "tab:red", "tab:orange", "tab:purple"][:len(codes)]
+    colours = ["0.9", "tab:green", "0.5", "tab:red", "tab:orange", "tab:purple", "tab:pink", "tab:cyan",
+               "tab:brown"][:len(codes)]
     cmap = ListedColormap(colours)
     norm = BoundaryNorm([c - 0.5 for c in codes] + [codes[-1] + 0.5], cmap.N)
-    im = ax.imshow(np.asarray(maps["status"].values), cmap=cmap, norm=norm, interpolation="nearest")
+    im = ax.imshow(status, cmap=cmap, norm=norm, interpolation="nearest")
     bar = fig.colorbar(im, ax=ax, ticks=codes, label="status (code)")
     bar.ax.set_yticklabels([f"{c}: {CUBE_STATUS[c]}" for c in codes], fontsize=7)
     ax.set_xlabel("x (column)")
@@ -378,11 +414,14 @@ def _cmd_fit_cube(args) -> int:
         t0 = time.perf_counter()
         try:
             chunk = args.chunk if args.chunk == "auto" else (args.chunk, args.chunk)
-            maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=chunk,
-                                    saturation=args.saturation, method=args.method, chunk_size=args.batch,
-                                    client=args.scheduler, n_workers=args.workers, resume=not args.restart,
-                                    progress=not args.quiet, allow_degenerate=args.allow_degenerate,
-                                    max_steps=args.max_steps)
+            with warnings.catch_warnings():  # the summary below says it, with the counts
+                warnings.filterwarnings("ignore", message=r"fit_cube: \d+ pixel fit\(s\) not to be trusted")
+                maps = fitting.fit_cube(objective, cube, out=out, mask=mask, chunk=chunk,
+                                        saturation=args.saturation, negative_sigmas=args.negative_sigmas,
+                                        method=args.method, chunk_size=args.batch,
+                                        client=args.scheduler, n_workers=args.workers, resume=not args.restart,
+                                        progress=not args.quiet, allow_degenerate=args.allow_degenerate,
+                                        max_steps=args.max_steps)
         except LayerstackError as e:  # fit_cube's hints name its keywords: say the command's options
             msg = str(e)
             for keyword, option in _OPTIONS.items():
@@ -394,17 +433,19 @@ def _cmd_fit_cube(args) -> int:
         seconds = time.perf_counter() - t0
         maps = maps.load()
         units = _units(objective, maps)
-    lines = _summary(maps, args.sigma is not None, wavelength.size - objective.n_parameters, seconds,
+    lines = _summary(maps, args.sigma is not None, wavelength.size, objective.n_parameters, seconds,
                      shape[0] * shape[1] - done_px)
     print(f"{PROG}: wrote {out} ({len(units)} parameter map(s) and their standard errors; progress log {log_path})")
     print(f"{PROG}: {_regions_line(maps)}")
     print("\n".join(lines))
+    flagged = np.isin(np.asarray(maps["status"].values), (5, 6, 7))
+    if flagged.any():
+        print(f"{PROG}: {int(flagged.sum())} pixel fit(s) not to be trusted as they are (status 5 implausible chi2, "
+              "6 on a bound, 7 not converged): see the status map; exit status 1")
     if not args.no_quicklook:
         directory = Path(args.quicklook) if args.quicklook else out.with_name(
             (out.name[:-5] if out.name.endswith(".zarr") else out.name) + "_quicklook")
         for path in _quicklook(maps, directory, units, title=f"{Path(args.model).name} — {Path(args.cube).name}"):
             print(f"{PROG}: wrote {path}")
     print(f"{PROG}: done in {time.perf_counter() - start:.1f} s")
-    status = np.asarray(maps["status"].values)
-    all_converged = bool(np.all(np.asarray(maps["converged"].values)[status == 0] == 1))
-    return 0 if all_converged else 1
+    return 1 if flagged.any() else 0

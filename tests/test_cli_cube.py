@@ -1,8 +1,10 @@
 """`layerstack fit-cube` and `layerstack predict --vary / --vary-table` (issue 19).
 
 The cube is made by the public forward model (:func:`layerstack_jax.predict`) from known maps of
-a film's thickness and index; the command line must give those maps back, mark the NaN and the
-masked pixel, write the quick-look PNGs, say that it resumes on a second run, and refuse a cube
+a film's thickness and index; the command line must give those maps back, fit the pixel with a
+NaN band from its other bands, mark the masked pixel, write the quick-look PNGs, say that it
+resumes on a second run, mark the two local-minimum pixels of ``examples/cube`` (status, summary,
+exit status 1), and refuse a cube
 without a geometry or a mask of the wrong shape with exit status 2 and one line. The batched
 prediction is compared with :func:`layerstack_jax.reflectance` on each single stack, built
 directly in Python (not through the stack file or the batch code).
@@ -47,7 +49,7 @@ def _truth():
     n = rng.uniform(1.9, 2.2, (NY, NX))
     film = ls.Layer(ls.Index(n[..., None]), d[..., None], coherent=True, name="film")
     cube = np.array(ls.predict(ls.Stack(1.0, [film], ls.Substrate(1.52)), WL, GEOMETRY))
-    cube[NAN_PIXEL + (4,)] = np.nan  # one NaN band: no data
+    cube[NAN_PIXEL + (4,)] = np.nan  # one NaN band: a bad band, left out of that pixel's fit
     return cube, d, n
 
 
@@ -91,9 +93,10 @@ def test_fit_cube_recovers_the_maps_marks_pixels_and_writes_quicklooks(fit_comma
     assert "resuming" not in out
     maps = xr.open_zarr(d / "maps.zarr", consolidated=False).load()
     status = maps["status"].values
-    assert status[NAN_PIXEL] == 2 and status[MASKED_PIXEL] == 1
+    assert status[NAN_PIXEL] == 0 and status[MASKED_PIXEL] == 1
+    assert maps["bands_used"].values[NAN_PIXEL] == WL.size - 1  # fitted from its 30 other bands
     ok = status == 0
-    assert ok.sum() == NY * NX - 2
+    assert ok.sum() == NY * NX - 1
     for var in ("thickness_nm_film", "n_film", "thickness_nm_film_stderr", "reduced_chi2"):
         assert np.all(np.isnan(maps[var].values[~ok])), var
     # the truth the cube was made from (noise-free data: the fits reach it)
@@ -101,10 +104,13 @@ def test_fit_cube_recovers_the_maps_marks_pixels_and_writes_quicklooks(fit_comma
     np.testing.assert_allclose(maps["thickness_nm_film"].values[ok], D_TRUE[ok], atol=0.05)
     np.testing.assert_allclose(maps["n_film"].values[ok], N_TRUE[ok], atol=1e-4)
     # summary table
-    assert re.search(r"outside the mask\s+1\n", out) and re.search(r"no data \(NaN/inf\)\s+1\n", out)
+    assert re.search(r"outside the mask\s+1\n", out) and re.search(r"no data \(NaN/inf\)\s+0\n", out)
+    assert re.search(r"fits with bad bands left out\s+1\n", out)
     assert "median reduced chi2" in out and "pixels/s" in out
-    assert re.search(r"implausible fits\s+0 ", out)  # noise-free data, sigma 1e-3: chi2 ~ 0
-    assert re.search(r"NOT converged\s+0\n", out) and re.search(rf"fitted\s+{NY * NX - 2}\n", out)
+    assert re.search(r"implausible chi2\s+0\n", out)
+    # noise-free data with sigma 1e-3: chi2 ~ 0, below its distribution (said, not a status)
+    assert re.search(rf"chi2 too small\s+{NY * NX - 1} \(below the central 99.9%", out)
+    assert re.search(r"NOT converged\s+0\n", out) and re.search(rf"fitted\s+{NY * NX - 1}\n", out)
     # quick looks: every map, printed
     ql = d / "maps_quicklook"
     for name in ("thickness_nm_film", "thickness_nm_film_stderr", "n_film", "n_film_stderr", "reduced_chi2",
@@ -164,6 +170,37 @@ def test_scheduler_address_runs_the_same_job_on_a_cluster(fit_command, capsys):
         np.testing.assert_array_equal(remote[name].values, local[name].values, err_msg=name)
 
 
+def test_examples_cube_marks_the_two_local_minimum_pixels(tmp_path, capsys):
+    """``examples/cube`` (its README's command): two pixels of the thin, low-index corner converge
+    to a local minimum near 250 nm (truth ~110 nm). They get status 5 "implausible chi2", the
+    summary counts them, and the command exits 1; every other pixel is fitted (the NaN-band
+    pixel (2, 3) from its 30 other bands) and near the truth of ``make_film_cube.py``."""
+    import os
+
+    import xarray as xr
+
+    ex = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "cube")
+    out = tmp_path / "film_maps.zarr"
+    argv = ["fit-cube", os.path.join(ex, "film_model.toml"), os.path.join(ex, "film_cube.npy"), "-w", "400:700:10",
+            "-g", "specular:8:R", "--mask", os.path.join(ex, "film_mask.npy"), "--sigma", "1e-3", "--chunk", "8",
+            "-o", str(out), "--quiet", "--no-quicklook"]
+    assert main(argv) == 1
+    text = capsys.readouterr().out
+    assert re.search(r"implausible chi2\s+2 \(chi2 above the central 99.9%", text)
+    assert re.search(r"fitted\s+181\n", text) and re.search(r"outside the mask\s+9\n", text)
+    assert "2 pixel fit(s) not to be trusted" in text and "exit status 1" in text
+    maps = xr.open_zarr(out, consolidated=False).load()
+    status = maps["status"].values
+    # the truth make_film_cube.py made the cube from: thickness 110 -> 190 nm across the 16 columns
+    truth = np.broadcast_to(np.linspace(110.0, 190.0, 16), status.shape)
+    far = np.abs(maps["thickness_nm_film"].values - truth) > 20.0  # NaN (not fitted): False
+    assert far.sum() == 2 and np.all(status[far] == 5) and np.all(maps["converged"].values[far] == 1)
+    near = np.isin(status, (0, 5, 6, 7)) & ~far
+    assert np.all(status[near] == 0)
+    assert np.max(np.abs(maps["thickness_nm_film"].values[near] - truth[near])) < 1.0
+    assert status[2, 3] == 0 and maps["bands_used"].values[2, 3] == 30
+
+
 def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):
     d = cube_files
     base = ["fit-cube", str(d / "model.toml"), str(d / "cube.npy"), "-w", "400:700:10", "-o", str(d / "x.zarr")]
@@ -173,6 +210,9 @@ def test_missing_geometry_and_bad_mask_are_user_errors(cube_files, capsys):
     assert main(base + ["-g", "specular:8:R", "--mask", str(d / "mask_wrong.npy")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "mask_wrong.npy" in err and f"({NY}, {NX})" in err
+    assert main(base + ["-g", "specular:8:R", "--negative-sigmas", "6"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--negative-sigmas must be a number from 0 to 5" in err
     assert not (d / "x.zarr").exists()  # refused before anything was written
 
 
@@ -309,5 +349,5 @@ def test_killed_command_restarted_resumes(cube_files, tmp_path):
     assert f"resuming: {done} of {NY * NX} chunks already written" in again.stdout
     maps = xr.open_zarr(out, consolidated=False).load()
     ok = maps["status"].values == 0
-    assert ok.sum() == NY * NX - 1  # every pixel but the NaN one (no mask here)
+    assert ok.sum() == NY * NX  # every pixel (no mask here), the NaN-band one from its other bands
     np.testing.assert_allclose(maps["thickness_nm_film"].values[ok], D_TRUE[ok], atol=0.05)

@@ -1,6 +1,8 @@
 """Hyperspectral cubes: lazy readers (ENVI written by ``spectral``, zarr, NetCDF/HDF5, npy) and
-:func:`fitting._cube.fit_cube` — equal to :func:`fitting.fit_batch` on the same pixels, masked and
-no-data pixels marked and never fitted, a run killed mid-way (SIGKILL of the process) and resumed
+:func:`fitting._cube.fit_cube` — equal to :func:`fitting.fit_batch` on the same pixels, a pixel's
+bad bands (NaN, saturated, far below zero) left out of its fit only (equal to a fit whose
+:class:`fitting.Dataset` masks that band), masked pixels never fitted, a fit in a local minimum
+marked by its χ² (not "fitted"), a run killed mid-way (SIGKILL of the process) and resumed
 giving identical maps, degenerate objectives refused before any compute, and the same job on a
 ``distributed.LocalCluster`` of 2 worker processes giving identical maps."""
 
@@ -85,16 +87,19 @@ def _stack(d=150.0, n=2.0):
     return ls.Stack(1.0, [ls.Layer(ls.Index(n), d, coherent=True, name="film")], ls.Substrate(1.52))
 
 
+#: pixel -> its one bad band: NaN, saturated (saturation=1 below), far below zero (-500 σ)
+BAD_BANDS = {(1, 2): 5, (3, 0): 7, (5, 1): 2}
+
+
 def _synthetic():
     """A cube made by the forward model (film thickness and index per pixel) with noise, one
-    NaN band, one saturated pixel and one negative value; and a user mask."""
+    NaN band, one saturated reading and one far below zero (:data:`BAD_BANDS`); and a user mask."""
     rng = np.random.default_rng(3)
     d = rng.uniform(100.0, 200.0, (NY, NX))
     n = rng.uniform(1.9, 2.2, (NY, NX))
     cube = predict(_stack(d[..., None], n[..., None]), WL, GEOMETRY) + rng.normal(0.0, 1e-3, (NY, NX, WL.size))
-    cube[1, 2, 5] = np.nan
-    cube[3, 0, 7] = 5.0  # saturated
-    cube[5, 1, 2] = -0.5  # negative
+    for (iy, ix), j, value in zip(BAD_BANDS, BAD_BANDS.values(), (np.nan, 5.0, -0.5)):
+        cube[iy, ix, j] = value
     mask = np.ones((NY, NX), bool)
     mask[4, 4] = False
     return cube, mask, d, n
@@ -120,32 +125,60 @@ def local_run(tmp_path_factory):
     return d, maps
 
 
-def test_fit_cube_equals_fit_batch_and_marks_unusable_pixels(local_run):
+def test_fit_cube_equals_fit_batch_and_drops_bad_bands_not_pixels(local_run):
+    from scipy.stats import chi2 as chi2_distribution
+
     _, maps = local_run
     status = maps["status"].values
-    expected = np.zeros((NY, NX), np.int8)
-    expected[1, 2], expected[3, 0], expected[5, 1], expected[4, 4] = 2, 3, 4, 1
-    np.testing.assert_array_equal(status, expected)
     assert set(np.unique(status)) <= set(CUBE_STATUS)
-    ok = status == 0
-    assert np.all(np.isnan(maps["thickness_film"].values[~ok])) and np.all(maps["num_steps"].values[~ok] == -1)
-    b = fitting.fit_batch(_objective(), CUBE[ok], chunk_size=8)
-    np.testing.assert_allclose(maps["thickness_film"].values[ok], b.x[:, 0], rtol=1e-10)
-    np.testing.assert_allclose(maps["n_film"].values[ok], b.x[:, 1], rtol=1e-10)
-    np.testing.assert_allclose(maps["thickness_film_stderr"].values[ok], b.stderr[:, 0], rtol=1e-6)
-    np.testing.assert_allclose(maps["chi2"].values[ok], b.chi2, rtol=1e-6, atol=1e-9)
-    np.testing.assert_array_equal(maps["num_steps"].values[ok], b.num_steps)
-    np.testing.assert_array_equal(maps["converged"].values[ok], b.converged.astype(np.int8))
-    np.testing.assert_array_equal(maps["identifiable"].values[ok], (b.rank == 2).astype(np.int8))
-    # and the fits found the truth the cube was made from (σ = 1e-3 noise)
-    assert np.all(maps["converged"].values[ok] == 1)
-    assert np.max(np.abs(maps["thickness_film"].values[ok] - D_TRUE[ok])) < 3.0
+    assert status[4, 4] == 1 and np.isnan(maps["thickness_film"].values[4, 4]) and maps["num_steps"].values[4, 4] == -1
+    made = np.isin(status, fitting.FIT_MADE)
+    assert made.sum() == NY * NX - 1  # every pixel but the masked one: a bad band drops the band, not the pixel
+    bands = np.full((NY, NX), WL.size)
+    for pixel in BAD_BANDS:
+        bands[pixel] -= 1
+    bands[4, 4] = -1
+    np.testing.assert_array_equal(maps["bands_used"].values, bands)
+    clean = made & (bands == WL.size)
+    b = fitting.fit_batch(_objective(), CUBE[clean], chunk_size=8)
+    np.testing.assert_allclose(maps["thickness_film"].values[clean], b.x[:, 0], rtol=1e-10)
+    np.testing.assert_allclose(maps["n_film"].values[clean], b.x[:, 1], rtol=1e-10)
+    np.testing.assert_allclose(maps["thickness_film_stderr"].values[clean], b.stderr[:, 0], rtol=1e-6)
+    np.testing.assert_allclose(maps["chi2"].values[clean], b.chi2, rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(maps["num_steps"].values[clean], b.num_steps)
+    np.testing.assert_array_equal(maps["converged"].values[clean], b.converged.astype(np.int8))
+    np.testing.assert_array_equal(maps["identifiable"].values[clean], (b.rank == 2).astype(np.int8))
+    # a pixel with a bad band: the fit of its spectrum by an objective whose Dataset masks that band
+    params = _objective().layout.params
+    for (iy, ix), j in BAD_BANDS.items():
+        keep = np.arange(WL.size) != j
+        own = fitting.Objective(_stack(), WL, fitting.Dataset(GEOMETRY, np.where(keep, CUBE[iy, ix], 0.0),
+                                                              sigma=1e-3, mask=keep), [p.parameter for p in params])
+        r = fitting.fit_batch(own, CUBE[iy, ix][None], chunk_size=1)  # the bad value is masked: unchecked
+        np.testing.assert_allclose([maps["thickness_film"].values[iy, ix], maps["n_film"].values[iy, ix]], r.x[0],
+                                   rtol=1e-8, err_msg=str((iy, ix)))
+        np.testing.assert_allclose(maps["chi2"].values[iy, ix], r.chi2[0], rtol=1e-6, err_msg=str((iy, ix)))
+        np.testing.assert_allclose(maps["reduced_chi2"].values[iy, ix], r.chi2[0] / (WL.size - 1 - 2), rtol=1e-6)
+        np.testing.assert_allclose(maps["thickness_film_stderr"].values[iy, ix], r.stderr[0, 0], rtol=1e-6)
+    # honest pixels (σ given): status 0 only where χ² lies inside the central 99.9 % of χ²(ν), ν = bands − 2
+    tail = chi2_distribution.sf(maps["chi2"].values[made], bands[made] - 2)
+    converged = maps["converged"].values[made] == 1
+    np.testing.assert_array_equal(status[made] == 5, converged & (tail < 5e-4))
+    assert np.all(converged)
+    # every fit that found the truth the cube was made from (σ = 1e-3 noise) is "fitted"; a fit in
+    # a local minimum (here pixel (3, 0), ~110 nm off, reduced χ² ~ 2600) is marked by its χ²
+    off = np.abs(maps["thickness_film"].values - D_TRUE) > 3.0
+    assert np.all(status[made & ~off] == 0) and np.all(status[made & off] == 5) and np.sum(made & off) <= 2
 
 
 def test_resume_of_another_job_is_refused(local_run, tmp_path):
     d, _ = local_run
     with pytest.raises(ls.LayerstackError, match="another job"):
         fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=d / "maps.zarr", **dict(OPTIONS, saturation=0.9))
+    with pytest.raises(ls.LayerstackError, match="another job"):
+        fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=d / "maps.zarr", **OPTIONS, negative_sigmas=3.0)
+    with pytest.raises(ls.LayerstackError, match=r"negative_sigmas must be a number from 0 to 5"):
+        fit_cube(_objective(), read_zarr(d / "cube.zarr"), out=d / "maps.zarr", **OPTIONS, negative_sigmas=6.0)
 
 
 def test_wavelength_mismatch_and_degenerate_objective_refused_before_compute(tmp_path):

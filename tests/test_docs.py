@@ -104,7 +104,7 @@ def test_no_raw_rest_roles_left(site):
 
 def test_cli_page_has_help_of_every_command(site):
     text = html.unescape(page_text(site, "reference/cli"))
-    for command in ("predict", "fit", "design"):
+    for command in ("predict", "fit", "fit-cube", "design"):
         assert f"usage: layerstack {command}" in text, f"`layerstack {command} --help` missing"
 
 

@@ -9,7 +9,8 @@ Provenance: synthetic, computed here by the public forward model :func:`layersta
 * film index n (dimensionless, k = 0): a ramp down the rows, 1.90 at y = 0 to 2.20 at y = 11.
 
 Gaussian noise of standard deviation 1e-3 (seed 19) is added, pixel (2, 3) gets a NaN band
-(a dead detector element: status 2 "no data" in the maps), and ``film_mask.npy`` leaves out the
+(a dead detector element: left out of that pixel's fit, which uses its 30 other bands), and
+``film_mask.npy`` leaves out the
 3 x 3 pixels of the bottom-right corner (status 1). Files written (float32 cube, ~24 kB):
 ``film_cube.npy`` (12 rows, 16 columns, 31 bands), ``film_mask.npy`` (12 x 16 booleans).
 """

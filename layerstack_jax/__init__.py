@@ -94,6 +94,15 @@ from ._rough import RoughBRDF as RoughBRDF
 from ._rough import microfacet_distribution as microfacet_distribution
 from ._rough import rough_brdf as rough_brdf
 from ._rough import smith_lambda as smith_lambda
+from ._leaves import Leaf as Leaf
+from ._leaves import LeafRole as LeafRole
+from ._leaves import file_fields as file_fields
+from ._leaves import leaf as leaf
+from ._leaves import leaf_role_at as leaf_role_at
+from ._leaves import optics_fixed_at as optics_fixed_at
+from ._leaves import replace_at as replace_at
+from ._leaves import stack_leaves as stack_leaves
+from ._stack import ExitMedium as ExitMedium
 from ._stack import LambertianBackground as LambertianBackground
 from ._stack import Layer as Layer
 from ._stack import Stack as Stack
@@ -145,6 +154,8 @@ __all__ = [
     "Ellipsometric",
     "Ellipsometry",
     "ellipsometry",
+    "ExitMedium",
+    "file_fields",
     "fixed_optics",
     "fresnel_amplitudes",
     "Geometry",
@@ -160,6 +171,10 @@ __all__ = [
     "is_physical",
     "LambertianBackground",
     "Layer",
+    "leaf",
+    "Leaf",
+    "leaf_role_at",
+    "LeafRole",
     "LayerstackError",
     "LayerstackWarning",
     "load_fit_stack",
@@ -175,6 +190,7 @@ __all__ = [
     "microfacet_distribution",
     "mueller_from_jones",
     "normal_wavevector",
+    "optics_fixed_at",
     "OBSERVERS",
     "open_cube",
     "Optics",
@@ -193,6 +209,7 @@ __all__ = [
     "read_zarr",
     "reflectance",
     "reflection_amplitudes",
+    "replace_at",
     "Response",
     "rough_brdf",
     "RoughBRDF",
@@ -208,6 +225,7 @@ __all__ = [
     "srgb_encode",
     "Stack",
     "stack_from_dict",
+    "stack_leaves",
     "stack_to_dict",
     "stokes",
     "Substrate",

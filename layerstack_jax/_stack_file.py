@@ -21,6 +21,7 @@ from ._effective_medium import Bruggeman, Looyenga
 from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
 from ._oscillators import CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
 from ._spectra_csv import read_csv_columns
+from ._leaves import file_fields
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
 from ._validate import LayerstackError, is_concrete
 
@@ -679,13 +680,18 @@ def stack_to_dict(stack: Stack) -> dict:
             t["alpha_per_nm"] = _spectrum_to_dict(layer.alpha, f"layer {i + 1} alpha")
         layers.append(t)
     d["layers"] = layers
-    if isinstance(stack.exit, Substrate):
-        d["substrate"] = {}
-        _material_to_dict(stack.exit.index, "substrate", d["substrate"])
-    else:
-        d["background"] = {}
-        _material_to_dict(stack.exit.index, "background", d["background"])
-        d["background"]["rho_g"] = _spectrum_to_dict(stack.exit.reflectance, "background rho_g")
+    table = stack.exit.table  # the exit's own table; its numbers under the keys its fields declare
+    d[table] = {}
+    _material_to_dict(stack.exit.index, table, d[table])
+    keys = {field: key for key, field in file_fields(stack.exit).items()}
+    for f in dataclasses.fields(stack.exit):
+        value = getattr(stack.exit, f.name)
+        if f.name == "index" or f.metadata.get("static") or value is None:
+            continue
+        if f.name not in keys:
+            raise LayerstackError(f"stack_to_dict: the [{table}] field {f.name!r} has no stack-file form here; "
+                                  "write this stack's file by hand")
+        d[table][keys[f.name]] = _spectrum_to_dict(value, f"{table} {keys[f.name]}")
     return d
 
 

@@ -132,6 +132,8 @@ NOT_SPECTRA = {
     "read_csv_columns": "files", "read_measurement": "files", "read_spectra_csv": "files",
     "save_spectra_csv": "files", "save_stack": "files", "stack_from_dict": "files", "stack_to_dict": "files",
     "write_measurement_csv": "files", "memory_budget": "memory for chunk='auto' (test_auto_chunks)",
+    "file_fields": "leaf roles (test_exit_seam)", "leaf": "field declaration", "leaf_role_at": "leaf roles",
+    "optics_fixed_at": "leaf roles", "replace_at": "returns a Stack", "stack_leaves": "leaf roles",
 }
 
 CASES = [(name, kind, angle) for name in (*ARRAY_RETURNING, *TUPLE_RETURNING)

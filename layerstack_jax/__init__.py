@@ -94,6 +94,15 @@ from ._rough import RoughBRDF as RoughBRDF
 from ._rough import microfacet_distribution as microfacet_distribution
 from ._rough import rough_brdf as rough_brdf
 from ._rough import smith_lambda as smith_lambda
+from ._kubelka_munk import KubelkaMunk as KubelkaMunk
+from ._kubelka_munk import Mixture as Mixture
+from ._kubelka_munk import Paint as Paint
+from ._kubelka_munk import PaintLayer as PaintLayer
+from ._kubelka_munk import k_over_s as k_over_s
+from ._kubelka_munk import km_r_infinity as km_r_infinity
+from ._kubelka_munk import km_reflectance as km_reflectance
+from ._kubelka_munk import km_transmittance as km_transmittance
+from ._kubelka_munk import layered as layered
 from ._leaves import Leaf as Leaf
 from ._leaves import LeafRole as LeafRole
 from ._leaves import file_fields as file_fields
@@ -169,7 +178,13 @@ __all__ = [
     "interpolate_k_t",
     "invert_background",
     "is_physical",
+    "k_over_s",
+    "km_r_infinity",
+    "km_reflectance",
+    "km_transmittance",
+    "KubelkaMunk",
     "LambertianBackground",
+    "layered",
     "Layer",
     "leaf",
     "Leaf",
@@ -188,12 +203,15 @@ __all__ = [
     "MemoryBudget",
     "memory_budget",
     "microfacet_distribution",
+    "Mixture",
     "mueller_from_jones",
     "normal_wavevector",
     "optics_fixed_at",
     "OBSERVERS",
     "open_cube",
     "Optics",
+    "Paint",
+    "PaintLayer",
     "parse_geometry",
     "parse_wavelengths",
     "photon_energy",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -161,6 +162,10 @@ def _set_field(stack, name: str, column: np.ndarray, source: str):
     index = getattr(node, "index", None)  # a layer's or an exit's material: its n, k
     if index is not None:
         keys.update({k: path + ("index", f) for k, f in file_fields(index).items() if k not in keys})
+    for f in dataclasses.fields(node) if dataclasses.is_dataclass(node) else ():  # one level down: a body's paint
+        part = getattr(node, f.name)
+        if f.name != "index" and dataclasses.is_dataclass(part):
+            keys.update({k: path + (f.name, g) for k, g in file_fields(part).items() if k not in keys})
     if key not in keys:
         hint = "" if index is None or file_fields(index) else (
             f" (its index is a {type(index).__name__}; only numbers n = ..., k = ... can be varied)")

@@ -389,3 +389,16 @@ def test_concentrations_fitted_under_a_varnish():
     r = ft.fit(obj)
     assert r.converged, r.reason
     np.testing.assert_allclose(r.values["c"], truth, rtol=1e-7)
+
+
+def test_the_paint_of_a_body_is_set_from_vary():
+    from layerstack_cli._predict import _set_field
+
+    stack = ls.Stack(1.0, [], ls.KubelkaMunk(1.5, ls.Paint(1e-4, 5e-3), 300.0, 0.5))
+    batched = _set_field(stack, "kubelka_munk.K_per_nm", np.array([1e-4, 3e-4]), "s.toml")
+    got = np.asarray(ls.predict(batched, WL, ls.Sphere(8.0)))
+    for i, k in enumerate((1e-4, 3e-4)):
+        one = ls.Stack(1.0, [], ls.KubelkaMunk(1.5, ls.Paint(k, 5e-3), 300.0, 0.5))
+        np.testing.assert_allclose(got[i], np.asarray(ls.reflectance(one, WL, ls.Sphere(8.0))), rtol=0, atol=1e-15)
+    with pytest.raises(ls.LayerstackError, match="fields: thickness_nm, ground_reflectance, n, k, K_per_nm, S_per_nm"):
+        _set_field(stack, "kubelka_munk.X", np.array([1.0]), "s.toml")

@@ -402,3 +402,32 @@ def test_the_paint_of_a_body_is_set_from_vary():
         np.testing.assert_allclose(got[i], np.asarray(ls.reflectance(one, WL, ls.Sphere(8.0))), rtol=0, atol=1e-15)
     with pytest.raises(ls.LayerstackError, match="fields: thickness_nm, ground_reflectance, n, k, K_per_nm, S_per_nm"):
         _set_field(stack, "kubelka_munk.X", np.array([1.0]), "s.toml")
+
+
+def test_a_body_fitted_from_the_command_line(tmp_path):
+    """``layerstack fit`` on a stack file with a body: the paint thickness and the red's
+    concentration recovered from noise-free 45°/0° data (the white's held: were it free too, the
+    products KX, SX would be all the data fix, and the report says the three cannot be separated)."""
+    import json
+
+    from layerstack_cli import main
+
+    (tmp_path / "s.toml").write_text(BODY_FILE)
+    wl = np.arange(400.0, 701.0, 10.0)
+    truth = _by_hand(20000.0)
+    truth = ls.Stack(truth.ambient, truth.layers, ls.KubelkaMunk(
+        1.5, ls.Mixture(np.array([0.6, 0.3]), truth.exit.paint.pigments), 20000.0, 0.8))
+    y = np.asarray(ls.reflectance(truth, wl, ls.Directional(45.0, 0.0)))
+    np.savetxt(tmp_path / "d.csv", np.column_stack([wl, y]), delimiter=",", header="wavelength_nm,45/0", comments="",
+               fmt="%.17g")
+    assert main(["fit", str(tmp_path / "s.toml"), str(tmp_path / "d.csv"), "-g", "45/0", "-o",
+                 str(tmp_path / "f.json")]) == 0
+    fit = json.loads((tmp_path / "f.json").read_text())["fits"][0]
+    assert fit["converged"]
+    assert fit["parameters"]["thickness_nm"]["value"] == pytest.approx(20000.0, rel=1e-6)
+    assert fit["parameters"]["concentration[red]"]["value"] == pytest.approx(0.3, rel=1e-6)
+    (tmp_path / "all.toml").write_text(BODY_FILE.replace("concentration = 0.6", "concentration = { value = 0.6, free = true }"))
+    assert main(["fit", str(tmp_path / "all.toml"), str(tmp_path / "d.csv"), "-g", "45/0", "-o",
+                 str(tmp_path / "g.json")]) == 0
+    warnings = " ".join(json.loads((tmp_path / "g.json").read_text())["fits"][0]["quality"]["warnings"])
+    assert "cannot separate" in warnings and "thickness_nm" in warnings

@@ -390,7 +390,7 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
         nodes: quadrature nodes per segment of the diffuse integrals (default
             :data:`layerstack_jax.DEFAULT_NODES`), for the fit and the ρg inversion.
     """
-    if not isinstance(stack.exit, LambertianBackground):
+    if not stack.exit.diffuse:
         raise LayerstackError("calibration_series: the stack must lie over a LambertianBackground")
     y = np.asarray(spectra, dtype=float)
     if y.ndim != 2:

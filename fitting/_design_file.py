@@ -490,7 +490,7 @@ def load_design(path) -> DesignFile:
     raw = {k: v for k, v in d.items() if k not in _DESIGN_KEYS}
     declarations: list = []
     stack = stack_from_dict(raw, path.parent, source=source, free=declarations)
-    if not isinstance(stack.exit, ls.Substrate):
+    if stack.exit.diffuse:
         raise FileLocation(source, "[background]").error(
             "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] "
             "is not supported")

@@ -36,11 +36,11 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax._custom_types import RealLike
-from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LambertianBackground, LayerstackError,
-                            LayerstackWarning, Stack, ellipsometry, fixed_optics, reflectance)
+from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LayerstackError, LayerstackWarning, Stack,
+                            ellipsometry, file_fields, fixed_optics, optics_fixed_at, reflectance)
 from layerstack_jax._stack import TabulatedSpectrum
 
-from ._parameters import Layout, Parameter, resolve_parameter
+from ._parameters import Layout, Parameter, is_instrument_path, resolve_parameter
 
 __all__ = ["Dataset", "Objective", "resample", "NEGATIVE_READING_FLOOR"]
 
@@ -93,11 +93,10 @@ def _reading_groups(geometries: list, coated: list, ellipsometry_angle: dict, da
 
 
 def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
-    """True if a free leaf at ``path`` leaves the :class:`layerstack_jax.Optics` unchanged: the
-    thickness or α of a thick (incoherent) layer, or the background's ρg."""
-    if path[:1] == ("layers",) and len(path) == 3:
-        return path[2] == "alpha" or (path[2] == "thickness" and not stack.layers[path[1]].coherent)
-    return path == ("exit", "reflectance") and isinstance(stack.exit, LambertianBackground)
+    """True if a free leaf at ``path`` leaves the :class:`layerstack_jax.Optics` unchanged, as its
+    field declares (:func:`layerstack_jax.optics_fixed_at`: a thick layer's thickness or α, ρg …);
+    an instrument's number (a path into the datasets' geometries) changes the optics."""
+    return not is_instrument_path(path) and optics_fixed_at(stack, path)
 
 
 def _has_range(x) -> bool:
@@ -118,8 +117,9 @@ def _where(stack: Stack, path) -> str:
         layer = stack.layers[keys[1]]
         rest = ".".join(str(k) for k in keys[2:]) or "index"
         return f"layers[{keys[1]}] ({layer.name or 'unnamed'}): {rest}"
-    if keys[:2] == ["exit", "reflectance"]:
-        return "background reflectance rho_g"
+    if keys[:1] == ["exit"] and len(keys) >= 2 and keys[1] != "index":  # a number of the exit: its file key
+        key = {f: k for k, f in file_fields(stack.exit).items()}.get(keys[1], ".".join(str(k) for k in keys[1:]))
+        return f"{stack.exit.label} {key}"
     return (" ".join(str(k) for k in keys[:1]) + " " + ".".join(str(k) for k in keys[1:])).strip()
 
 

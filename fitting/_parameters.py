@@ -53,7 +53,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax._custom_types import RealLike
-from layerstack_jax import Cauchy, Index, LambertianBackground, LayerstackError, Sellmeier, Stack
+from layerstack_jax import Cauchy, Index, LayerstackError, Sellmeier, Stack, leaf_role_at
 from layerstack_jax._stack import as_spectrum
 from layerstack_jax.io import FreeDeclaration, load_fit_stack
 
@@ -372,8 +372,6 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
         path = ("layers", _find_layer(stack, path[1], label), *path[2:])
     elif path[0] not in ("ambient", "exit"):
         raise LayerstackError(f"free parameter {label!r}: path must start with 'layers', 'ambient' or 'exit', got {path!r}")
-    if path[:2] == ("exit", "reflectance") and not isinstance(stack.exit, LambertianBackground):
-        raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
     node = stack
     where = "stack"
     for i, part in enumerate(path):
@@ -383,8 +381,9 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
             continue
         if not hasattr(node, part) or part.startswith("_"):
             fields = [f.name for f in dataclasses.fields(node)] if dataclasses.is_dataclass(node) else []
+            what = f"the stack's exit is a {node.label}," if node is stack.exit else f"{where} ({type(node).__name__})"
             raise LayerstackError(
-                f"free parameter {label!r}: {where} ({type(node).__name__}) has no field {part!r}"
+                f"free parameter {label!r}: {what} has no field {part!r}"
                 + (f" (fields: {fields})" if fields else "")
             )
         node = getattr(node, part)
@@ -395,8 +394,6 @@ def canonical_path(stack: Stack, p: Parameter) -> tuple:
         raise LayerstackError(
             f"free parameter {label!r}: layer {path[1]} is coherent; alpha is for incoherent layers (fit k instead)"
         )
-    if path[0] == "exit" and path[-1] == "reflectance" and not isinstance(stack.exit, LambertianBackground):
-        raise LayerstackError(f"free parameter {label!r}: the stack has a specular substrate, no background rho_g")
     field = path[:-1] if element_of(stack, path) is not None else path
     if field[-2:-1] == ("index",) and field[-1] in ("n", "k", "A", "B", "C"):
         mat = get_path(stack, field[:-1])
@@ -548,9 +545,8 @@ def resolve_parameter(p: Parameter, stack: Stack, wavelength_nm: np.ndarray, n_s
     wl = np.asarray(wavelength_nm, float)
     leaf = _current_leaf(stack, path, wl, spectral=p.basis is not None)
     basis = p.basis
-    if basis is None and leaf is not None and leaf.ndim == 1 and leaf.shape == wl.shape and path[-1] in (
-        "alpha", "reflectance", "n"
-    ):
+    if (basis is None and leaf is not None and leaf.ndim == 1 and leaf.shape == wl.shape
+            and element_of(stack, path) is None and leaf_role_at(stack, path).per_wavelength):
         basis = "free"  # the stack holds a spectrum: fit it per wavelength unless told otherwise
     if isinstance(basis, str):
         B = np.eye(wl.size)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from layerstack_jax import Index, LambertianBackground, LayerstackError, Stack, Tabulated, parse_geometry
+from layerstack_jax import Index, LayerstackError, Stack, Tabulated, parse_geometry
 
 PROG = "layerstack"
 
@@ -99,10 +99,7 @@ def _describe(stack: Stack) -> str:
         d = float(np.asarray(layer.thickness))
         size = f"{d / 1000:g} µm" if d >= 1000 else f"{d:g} nm"
         parts.append(f"{layer.name or 'layer'} {size}{'' if layer.coherent else ' (incoherent)'}")
-    if isinstance(stack.exit, LambertianBackground):
-        parts.append(f"Lambertian background {index(stack.exit.index)}")
-    else:
-        parts.append(f"substrate {index(stack.exit.index)}")
+    parts.append(f"{stack.exit.label} {index(stack.exit.index)}")
     return " | ".join(parts)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -68,10 +69,6 @@ def _add_predict_parser(sub) -> None:
 
 
 # --------------------------------------------------------------------------- batches (--vary)
-_TOP = {"ambient": ("n",), "substrate": ("n", "k"), "background": ("n", "rho_g")}
-_LAYER_FIELDS = ("thickness_nm", "alpha_per_nm", "n", "k")
-
-
 def _vary_grid(spec: str) -> tuple[str, np.ndarray]:
     """``(name, values)`` of one ``--vary NAME=START:STOP:STEP`` (or ``NAME=v1,v2,...``)."""
     name, sep, grid = spec.partition("=")
@@ -126,61 +123,65 @@ def _samples(args) -> tuple[list, np.ndarray]:
     return names, np.stack([m.ravel() for m in mesh], axis=1)
 
 
-def _set_field(stack, name: str, column: np.ndarray, source: str):
-    """``stack`` with the file field ``name`` (``LAYER.FIELD``) set to one value per sample,
-    ``column`` ``(samples,)``, as a ``(samples, 1)`` leaf; rebuilt through the constructors, so
-    the values are checked (a negative thickness, ρg outside [0, 1] …)."""
-    from layerstack_jax import Index, LambertianBackground, Layer, Stack, Substrate
+def _exit_tables() -> set:
+    """The stack-file tables of every exit medium the library knows (``substrate``, ``background`` …)."""
+    from layerstack_jax import ExitMedium
 
-    owner, dot, field = name.rpartition(".")
+    found, todo = set(), [ExitMedium]
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        if isinstance(cls.__dict__.get("table"), str):
+            found.add(cls.table)
+    return found
+
+
+def _set_field(stack, name: str, column: np.ndarray, source: str):
+    """``stack`` with the file field ``name`` (``LAYER.KEY``, ``ambient.n``, ``substrate.k``,
+    ``background.rho_g`` …: a key that a field of the layer, the exit or their index declares,
+    :func:`layerstack_jax.file_fields`) set to one value per sample, ``column`` ``(samples,)``,
+    as a ``(samples, 1)`` leaf; rebuilt through the constructors, so the values are checked (a
+    negative thickness, ρg outside [0, 1] …)."""
+    from layerstack_jax import file_fields, replace_at
+
+    owner, dot, key = name.rpartition(".")
     layers = {layer.name: i for i, layer in enumerate(stack.layers)}
     if not dot or not owner:
         raise LayerstackError(f"{name}: write LAYER.FIELD (layers in {source}: {', '.join(layers) or 'none'})")
     values = np.asarray(column, dtype=float)[:, None]
-
-    def index_with(material, what):
-        if not isinstance(material, Index) or np.ndim(material.n) or np.ndim(material.k):
-            raise LayerstackError(f"{name}: the {what} index in {source} is not a plain number "
-                                  f"({type(material).__name__}); only numbers n = ..., k = ... can be varied")
-        return Index(values, material.k) if field == "n" else Index(material.n, values)
-
-    if owner in _TOP and owner not in layers:
-        if field not in _TOP[owner]:
-            raise LayerstackError(f"{name}: unknown field {field!r} of [{owner}]; fields: {', '.join(_TOP[owner])}")
-        if owner == "ambient":
-            return Stack(index_with(stack.ambient, "ambient"), stack.layers, stack.exit)
-        kind = "substrate" if isinstance(stack.exit, Substrate) else "background"
-        if owner != kind:
-            raise LayerstackError(f"{name}: {source} has a [{kind}], not a [{owner}]")
-        if owner == "substrate":
-            return Stack(stack.ambient, stack.layers, Substrate(index_with(stack.exit.index, "substrate")))
-        if field == "rho_g":
-            if callable(stack.exit.reflectance) or np.ndim(stack.exit.reflectance):
-                raise LayerstackError(f"{name}: rho_g in {source} is a spectrum; only a number can be varied")
-            return Stack(stack.ambient, stack.layers, LambertianBackground(stack.exit.index, values))
-        return Stack(stack.ambient, stack.layers, LambertianBackground(index_with(stack.exit.index, "background"),
-                                                                       stack.exit.reflectance))
-    if owner not in layers:
-        raise LayerstackError(f"{name}: no layer named {owner!r} in {source} (layers: {', '.join(layers) or 'none'}; "
-                              f"or {', '.join(f'{t}.FIELD' for t in _TOP)})")
-    if field not in _LAYER_FIELDS:
-        raise LayerstackError(f"{name}: unknown field {field!r} of layer {owner!r}; fields: {', '.join(_LAYER_FIELDS)}")
-    i = layers[owner]
-    old = stack.layers[i]
-    index, thickness, alpha = old.index, old.thickness, old.alpha
-    if field == "thickness_nm":
-        thickness = values
-    elif field == "alpha_per_nm":
-        if old.coherent:
-            raise LayerstackError(f"{name}: layer {owner!r} is coherent; alpha_per_nm is for incoherent layers "
-                                  "(vary its k)")
-        if alpha is not None and (callable(alpha) or np.ndim(alpha)):
-            raise LayerstackError(f"{name}: alpha_per_nm of layer {owner!r} is a spectrum; only a number can be varied")
-        alpha = values
+    tables = {"ambient"} | _exit_tables()
+    if owner in layers:
+        path, what = ("layers", layers[owner]), f"layer {owner!r}"
+    elif owner == "ambient":
+        path, what = ("ambient",), "[ambient]"
+    elif owner == stack.exit.table:
+        path, what = ("exit",), f"[{owner}]"
+    elif owner in tables:
+        raise LayerstackError(f"{name}: {source} has a [{stack.exit.table}], not a [{owner}]")
     else:
-        index = index_with(old.index, f"layer {owner!r}")
-    layer = Layer(index, thickness, coherent=old.coherent, alpha=alpha, name=old.name)
-    return Stack(stack.ambient, stack.layers[:i] + (layer,) + stack.layers[i + 1:], stack.exit)
+        raise LayerstackError(f"{name}: no layer named {owner!r} in {source} (layers: {', '.join(layers) or 'none'}; "
+                              f"or {', '.join(f'{t}.FIELD' for t in sorted(tables))})")
+    node = stack
+    for part in path:
+        node = node[part] if isinstance(part, int) else getattr(node, part)
+    keys = {k: path + (f,) for k, f in file_fields(node).items()}
+    index = getattr(node, "index", None)  # a layer's or an exit's material: its n, k
+    if index is not None:
+        keys.update({k: path + ("index", f) for k, f in file_fields(index).items() if k not in keys})
+    for f in dataclasses.fields(node) if dataclasses.is_dataclass(node) else ():  # one level down: a body's paint
+        part = getattr(node, f.name)
+        if f.name != "index" and dataclasses.is_dataclass(part):
+            keys.update({k: path + (f.name, g) for k, g in file_fields(part).items() if k not in keys})
+    if key not in keys:
+        hint = "" if index is None or file_fields(index) else (
+            f" (its index is a {type(index).__name__}; only numbers n = ..., k = ... can be varied)")
+        raise LayerstackError(f"{name}: unknown field {key!r} of {what}; fields: {', '.join(keys)}{hint}")
+    old = stack
+    for part in keys[key]:
+        old = old[part] if isinstance(part, int) else getattr(old, part)
+    if old is not None and (callable(old) or np.ndim(old)):
+        raise LayerstackError(f"{name}: {key} in {source} is a spectrum or an array; only a number can be varied")
+    return replace_at(stack, keys[key], values)
 
 
 def _sample_label(names: list, row) -> str:

@@ -96,6 +96,24 @@ from ._rough import RoughBRDF as RoughBRDF
 from ._rough import microfacet_distribution as microfacet_distribution
 from ._rough import rough_brdf as rough_brdf
 from ._rough import smith_lambda as smith_lambda
+from ._kubelka_munk import KubelkaMunk as KubelkaMunk
+from ._kubelka_munk import Mixture as Mixture
+from ._kubelka_munk import Paint as Paint
+from ._kubelka_munk import PaintLayer as PaintLayer
+from ._kubelka_munk import k_over_s as k_over_s
+from ._kubelka_munk import km_r_infinity as km_r_infinity
+from ._kubelka_munk import km_reflectance as km_reflectance
+from ._kubelka_munk import km_transmittance as km_transmittance
+from ._kubelka_munk import layered as layered
+from ._leaves import Leaf as Leaf
+from ._leaves import LeafRole as LeafRole
+from ._leaves import file_fields as file_fields
+from ._leaves import leaf as leaf
+from ._leaves import leaf_role_at as leaf_role_at
+from ._leaves import optics_fixed_at as optics_fixed_at
+from ._leaves import replace_at as replace_at
+from ._leaves import stack_leaves as stack_leaves
+from ._stack import ExitMedium as ExitMedium
 from ._stack import LambertianBackground as LambertianBackground
 from ._stack import Layer as Layer
 from ._stack import Stack as Stack
@@ -148,6 +166,8 @@ __all__ = [
     "Ellipsometric",
     "Ellipsometry",
     "ellipsometry",
+    "ExitMedium",
+    "file_fields",
     "fixed_optics",
     "fresnel_amplitudes",
     "Geometry",
@@ -161,8 +181,18 @@ __all__ = [
     "interpolate_k_t",
     "invert_background",
     "is_physical",
+    "k_over_s",
+    "km_r_infinity",
+    "km_reflectance",
+    "km_transmittance",
+    "KubelkaMunk",
     "LambertianBackground",
+    "layered",
     "Layer",
+    "leaf",
+    "Leaf",
+    "leaf_role_at",
+    "LeafRole",
     "LayerstackError",
     "LayerstackWarning",
     "load_fit_stack",
@@ -176,11 +206,15 @@ __all__ = [
     "MemoryBudget",
     "memory_budget",
     "microfacet_distribution",
+    "Mixture",
     "mueller_from_jones",
     "normal_wavevector",
+    "optics_fixed_at",
     "OBSERVERS",
     "open_cube",
     "Optics",
+    "Paint",
+    "PaintLayer",
     "parse_geometry",
     "parse_wavelengths",
     "photon_energy",
@@ -196,6 +230,7 @@ __all__ = [
     "read_zarr",
     "reflectance",
     "reflection_amplitudes",
+    "replace_at",
     "Response",
     "rough_brdf",
     "RoughBRDF",
@@ -211,6 +246,7 @@ __all__ = [
     "srgb_encode",
     "Stack",
     "stack_from_dict",
+    "stack_leaves",
     "stack_to_dict",
     "stokes",
     "Substrate",

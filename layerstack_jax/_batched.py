@@ -9,7 +9,8 @@ Which axes of a leaf are batch axes (the rule the :class:`~layerstack_jax.Layer`
 states: leaves broadcast against ``(*batch, wl)``):
 
 * *spectral* leaves — ``Layer.thickness``, ``Layer.alpha``, ``LambertianBackground.reflectance``,
-  ``Index.n``/``k``, ``Cauchy.A``/``B``/``C``/``k``, ``Sellmeier.k`` — are a scalar, ``(1,)`` or
+  ``Index.n``/``k``, ``Cauchy.A``/``B``/``C``/``k``, ``Sellmeier.k`` … (each field declares its role
+  where it is defined: :mod:`layerstack_jax._leaves`) — are a scalar, ``(1,)`` or
   ``(wl,)`` for one stack; with batch axes they are ``(*batch, 1)`` or ``(*batch, wl)``. When
   ``batch_shape`` is given, ``(*batch_shape,)`` (one scalar per spectrum, no trailing axis) is
   accepted too.
@@ -71,7 +72,8 @@ import numpy as np
 from ._geometry import Geometry, fixed_optics, reflectance
 from ._quadrature import DEFAULT_NODES
 from ._progress import reporter
-from ._stack import LambertianBackground, Layer, Stack
+from ._leaves import stack_leaves
+from ._stack import Stack
 from ._validate import LayerstackError, is_concrete
 
 __all__ = ["predict", "batch_layout", "BatchLayout", "DEFAULT_CHUNK", "DEFAULT_STEP", "AUTO_CHUNK_MAX",
@@ -91,14 +93,6 @@ MEMORY_FRACTION = 0.5
 DEFAULT_STEP = 2048
 
 log = logging.getLogger("layerstack_jax.batched")
-
-# (module type name, field name) -> role; other leaves are "vector" (core: one trailing axis at most)
-_SPECTRAL_FIELDS = {
-    ("Layer", "thickness"), ("Layer", "alpha"), ("LambertianBackground", "reflectance"),
-    ("Index", "n"), ("Index", "k"), ("Cauchy", "A"), ("Cauchy", "B"), ("Cauchy", "C"), ("Cauchy", "k"),
-    ("Sellmeier", "k"),
-}
-
 
 class BatchLayout(NamedTuple):
     """How the leaves of a stack are batched (made by :func:`batch_layout`).
@@ -219,26 +213,8 @@ def memory_budget(fraction: float = MEMORY_FRACTION, *, device: bool = False) ->
 
 
 def _field_names(stack: Stack):
-    """Per leaf: (readable field name, role) — walking the flattened paths through the stack."""
-    out = []
-    for path, _ in jax.tree_util.tree_flatten_with_path(stack)[0]:
-        obj, parts, parent, field = stack, [], stack, None
-        for key in path:
-            parent = obj
-            if isinstance(key, jax.tree_util.GetAttrKey):
-                field = key.name
-                obj = getattr(obj, key.name)
-                parts.append(f".{key.name}")
-            elif isinstance(key, jax.tree_util.SequenceKey):
-                obj = obj[key.idx]
-                label = getattr(obj, "name", "") if isinstance(obj, Layer) else ""
-                parts.append(f"[{key.idx}]" + (f" ({label!r})" if label else ""))
-            else:  # pragma: no cover - dict keys do not occur in a Stack
-                obj = obj[getattr(key, "key", key)]
-                parts.append(f"[{key}]")
-        role = "spectral" if (type(parent).__name__, field) in _SPECTRAL_FIELDS else "vector"
-        out.append(("".join(parts).lstrip("."), role))
-    return out
+    """Per leaf: (readable field name, axes role) — as each field declares it (:mod:`layerstack_jax._leaves`)."""
+    return [(leaf.name, leaf.role.axes) for leaf in stack_leaves(stack)]
 
 
 def _broadcasts(part: tuple, batch: tuple) -> bool:
@@ -325,21 +301,10 @@ def batch_layout(stack: Stack, n_wavelengths: int, batch_shape=None) -> BatchLay
 
 
 def _optics_fixed_by(stack: Stack, names: tuple, batched: tuple) -> bool:
-    """True if every batched leaf leaves :func:`fixed_optics` unchanged: thick-layer
-    thicknesses, α, and ρg (the Fresnel algebra can then be computed once for the batch)."""
-    flat = jax.tree_util.tree_flatten_with_path(stack)[0]
-    for (path, _), b in zip(flat, batched):
-        if not b:
-            continue
-        keys = [getattr(k, "name", getattr(k, "idx", None)) for k in path]
-        if keys[:1] == ["layers"] and len(keys) >= 3:
-            layer = stack.layers[keys[1]]
-            if keys[2] == "alpha" or (keys[2] == "thickness" and not layer.coherent):
-                continue
-        if keys[:2] == ["exit", "reflectance"] and isinstance(stack.exit, LambertianBackground):
-            continue
-        return False
-    return True
+    """True if every batched leaf leaves :func:`fixed_optics` unchanged (its field says so: a thick
+    layer's thickness, α, ρg, a scattering body's numbers), so the Fresnel algebra can be computed
+    once for the batch."""
+    return all(leaf.fixed_optics for leaf, b in zip(stack_leaves(stack), batched) if b)
 
 
 def _digest(tree) -> str:

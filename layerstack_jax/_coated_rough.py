@@ -79,7 +79,7 @@ from ._he_torrance import (SHADOWING_FORMS, auto_terms, check_scattering_inputs,
 from ._illumination import snell_invariant
 from ._numerics import abs2, as_complex, safe_divide, safe_divide_nonzero
 from ._response import natural
-from ._stack import ResolvedStack, Stack, Substrate, resolve
+from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, LayerstackWarning, is_concrete
 
 __all__ = ["CoatedRough", "coated_rough", "FORMS", "PREFACTORS", "check_coated_stack", "rough_specular",
@@ -206,7 +206,7 @@ def rough_diffuse(rs: ResolvedStack, s_in, s_out, phi, sigma0, tau, *, n_terms: 
 def check_coated_stack(stack: Stack) -> None:
     """The coated-rough model needs coherent films over a specular :class:`Substrate` (the rough
     object)."""
-    if not isinstance(stack.exit, Substrate):
+    if stack.exit.diffuse:
         raise LayerstackError("coated_rough: stack.exit must be a Substrate (the rough object), not a background")
     for i, layer in enumerate(stack.layers):
         if not layer.coherent:

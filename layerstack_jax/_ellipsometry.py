@@ -196,7 +196,7 @@ from ._custom_types import Array, Complex, Float, RealLike
 from ._illumination import snell_invariant
 from ._numerics import abs2, safe_abs, safe_atan2, safe_divide, safe_sqrt
 from ._polarimetry import front_correlations
-from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
+from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check, check_angle_deg, check_finite, check_nonnegative, is_concrete
 
 __all__ = ["Ellipsometry", "EllipsometerReading", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
@@ -306,9 +306,10 @@ def _amplitudes_resolved(rs: ResolvedStack, angle_rad):
 def _check_transmission(stack: Stack, rs: ResolvedStack) -> ResolvedStack:
     """Transmission ellipsometry reads the beam leaving into a transparent specular exit medium:
     ``rs`` with its exit index checked (k = 0; eagerly, or by ``equinox.error_if`` when traced)."""
-    if isinstance(stack.exit, LambertianBackground):
+    if rs.rho_g is not None:
         raise LayerstackError("exit: transmission ellipsometry reads the beam transmitted into a specular exit "
-                              "medium (a Substrate), not into a LambertianBackground")
+                              "medium (a Substrate), not into a diffusing body (a LambertianBackground, a "
+                              "KubelkaMunk body …)")
     n_exit = check("exit index", rs.n[-1], lambda a, xp: xp.imag(a) != 0,
                    "must be transparent (k = 0) for transmission ellipsometry: the transmitted beam reaches the "
                    "analyser through it")

@@ -111,7 +111,7 @@ class Geometry(eqx.Module):
         """What this instrument reads for ``stack`` on ``wavelength_nm`` (nm), reusing
         ``optics`` (from :func:`fixed_optics`) when given. Shaped ``(*angle, wl)``."""
         rs = self._seen(resolve(stack, wavelength_nm))
-        background = isinstance(stack.exit, LambertianBackground)
+        background = rs.rho_g is not None
         if optics is None:
             optics = self.optics(rs, background, nodes)
         else:
@@ -888,7 +888,7 @@ def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int 
     """
     _check_geometry(geometry)
     rs = geometry._seen(resolve(stack, wavelength_nm))
-    return geometry.optics(rs, isinstance(stack.exit, LambertianBackground), nodes)
+    return geometry.optics(rs, rs.rho_g is not None, nodes)
 
 
 def _check_geometry(geometry) -> None:
@@ -949,11 +949,11 @@ def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry,
     Returns:
         ρg, dimensionless, shaped like ``measured`` broadcast against ``(*angle, wl)``.
     """
-    if not isinstance(stack.exit, LambertianBackground):
+    if not stack.exit.diffuse:
         raise LayerstackError("invert_background needs a stack over a LambertianBackground")
     _check_geometry(geometry)
     measured = jnp.asarray(measured)
-    unit = eqx.tree_at(lambda st: st.exit.reflectance, stack, 1.0)
+    unit = Stack(stack.ambient, stack.layers, LambertianBackground(stack.exit.index, 1.0))  # ρg = 1, same binder
     rs = geometry._seen(resolve(unit, wavelength_nm))
     A, r_b, prepare = geometry.background_factor(rs, nodes)
     measured = prepare(measured)

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import Coefficients, RealLike, TableColumn
+from ._leaves import leaf
 from ._numerics import complex_from
 from ._validate import LayerstackError, check_finite, check_nonnegative, check_wavelength_range, is_concrete
 
@@ -47,8 +48,8 @@ class Index(Material):
         k: extinction coefficient (>= 0), same shapes.
     """
 
-    n: RealLike
-    k: RealLike = 0.0
+    n: RealLike = leaf(spectral=True, per_wavelength=True, file_key="n")
+    k: RealLike = leaf(spectral=True, file_key="k", default=0.0)
 
     def __check_init__(self):
         check_finite("Index.n", self.n)
@@ -70,10 +71,10 @@ class Cauchy(Material):
     shape ``(wl,)`` (broadcast with the coefficients' shapes).
     """
 
-    A: RealLike
-    B: RealLike = 0.0
-    C: RealLike = 0.0
-    k: RealLike = 0.0
+    A: RealLike = leaf(spectral=True)
+    B: RealLike = leaf(spectral=True, default=0.0)
+    C: RealLike = leaf(spectral=True, default=0.0)
+    k: RealLike = leaf(spectral=True, default=0.0)
 
     def __check_init__(self):
         check_nonnegative("Cauchy.k", self.k)
@@ -98,7 +99,7 @@ class Sellmeier(Material):
 
     B: Coefficients
     C: Coefficients
-    k: RealLike = 0.0
+    k: RealLike = leaf(spectral=True, default=0.0)
 
     def __check_init__(self):
         if is_concrete(self.B) and np.shape(self.B) != np.shape(self.C):
@@ -150,7 +151,7 @@ class Tabulated(Material):
     """
 
     wavelength_nm: np.ndarray = eqx.field(static=True, converter=lambda x: tuple(np.asarray(x, float).tolist()))
-    n: TableColumn
+    n: TableColumn = leaf(per_wavelength=True)
     k: Optional[TableColumn] = None
     name: str = eqx.field(static=True, default="tabulated")
 

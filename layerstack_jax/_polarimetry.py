@@ -70,7 +70,7 @@ from ._incoherent import add_layers, beer_attenuation
 from ._numerics import as_complex, safe_divide, safe_sqrt
 from ._quadrature import DEFAULT_NODES
 from ._response import stack_intensities, thick_media
-from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
+from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check_angle_deg
 
 __all__ = [
@@ -133,9 +133,9 @@ def _T_pol(rs: ResolvedStack, angle_rad):
 
 def _background_factor(stack: Stack, rs: ResolvedStack, nodes: int) -> Spectrum:
     r""":math:`K = (n_0/n_g)^2 \rho_g / (\pi (1 - \rho_g r_b))`, shaped ``(wl,)``."""
-    if not isinstance(stack.exit, LambertianBackground):
+    if rs.rho_g is None:
         raise LayerstackError(
-            "exit: a polarized BRDF / diffuse Mueller matrix needs a LambertianBackground "
+            "exit: a polarized BRDF / diffuse Mueller matrix needs a diffusing exit (a LambertianBackground …) "
             "(a specular substrate has no diffuse part; use specular_mueller)"
         )
     r_b = diffuse_resolved(rs, "back", nodes).r

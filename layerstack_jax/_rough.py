@@ -60,7 +60,7 @@ from ._fresnel import exit_medium_ratio
 from ._illumination import diffuse_resolved, snell_invariant_from_cos
 from ._quadrature import DEFAULT_NODES, unit_rule
 from ._response import natural, stack_intensities
-from ._stack import LambertianBackground, ResolvedStack, Stack, resolve
+from ._stack import ResolvedStack, Stack, resolve
 from ._validate import LayerstackError, check_angle_deg, check_finite, is_concrete
 
 __all__ = ["RoughBRDF", "rough_brdf", "microfacet_distribution", "smith_lambda"]
@@ -250,7 +250,7 @@ def rough_brdf(
     G2 = 1.0 / (1.0 + smith_lambda(i[2], alpha, distribution) + smith_lambda(o[2], alpha, distribution))
     R, _ = _natural_R_T(rs, cos_d)
     spec = (D * G2 / (4.0 * i[2] * o[2]))[..., None] * R
-    if include_diffuse and isinstance(stack.exit, LambertianBackground):
+    if include_diffuse and rs.rho_g is not None:
         E = functools.partial(_rough_transmittance, rs, alpha=alpha, distribution=distribution, n_u=facet_nodes, n_phi=facet_nodes)
         diff = _rough_background_factor(rs, E, nodes) * E(ti) * E(to)
     else:

@@ -1,29 +1,36 @@
-r"""Stack description as pytrees: layers, substrate or Lambertian background, and the stack.
+r"""Stack description as pytrees: layers, the exit medium, and the stack.
 
 A stack is ambient · layers 1..K · exit medium, ordered from the side the light comes from.
-The exit is either a specular :class:`Substrate` (semi-infinite medium) or a
+The exit is any :class:`ExitMedium`: a specular :class:`Substrate` (semi-infinite medium), a
 :class:`LambertianBackground` (a diffusing medium of index :math:`n_g` and intrinsic reflectance
-:math:`\rho_g`, Simonot et al. §4). Structure (number of layers, which are coherent) is static;
-every number (indices, thicknesses, α, ρg) is a pytree leaf that can be traced, vmapped and
-differentiated.
+:math:`\rho_g`, Simonot et al. §4), or a scattering body that lowers itself to such a ρg (a
+Kubelka–Munk body, :mod:`layerstack_jax._kubelka_munk`). Code outside an exit's own module never
+asks which class an exit is: it asks the interface (``diffuse``, ``lower``) or the resolved
+stack (``rho_g is None``). Structure (number of layers, which are coherent) is static; every
+number (indices, thicknesses, α, ρg) is a pytree leaf that can be traced, vmapped and
+differentiated; each field declares its role (batch axes, fixed optics, file key) where it is
+defined (:mod:`layerstack_jax._leaves`).
 """
 
 from __future__ import annotations
 
+import abc
 import functools
-from typing import NamedTuple, Optional, Union
+from typing import ClassVar, NamedTuple, Optional
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import IndexSpectrum, RealLike, RealSpectrumLike, TableColumn, Wavelengths
+from ._leaves import leaf
 from ._materials import Index, Material, Tabulated, as_material
 from ._validate import (LayerstackError, PendingChecks, check, check_nonnegative, check_positive,
                         check_unit_interval, is_concrete, value_text, warn_if, warn_if_implausible)
 
 __all__ = [
     "Layer",
+    "ExitMedium",
     "Substrate",
     "LambertianBackground",
     "Stack",
@@ -48,10 +55,11 @@ class Layer(eqx.Module):
         name: label used in messages and files.
     """
 
-    index: Material = eqx.field(converter=as_material)
-    thickness: RealLike
+    index: Material = leaf(converter=as_material)
+    thickness: RealLike = leaf(spectral=True, fixed_optics=lambda layer: not layer.coherent, file_key="thickness_nm")
     coherent: bool = eqx.field(static=True, default=True)
-    alpha: Optional[RealSpectrumLike] = None
+    alpha: Optional[RealSpectrumLike] = leaf(spectral=True, fixed_optics=True, per_wavelength=True,
+                                             file_key="alpha_per_nm", default=None)
     name: str = eqx.field(static=True, default="")
 
     def __check_init__(self):
@@ -66,7 +74,39 @@ class Layer(eqx.Module):
                 check_nonnegative(f"{label}: alpha (1/nm)", self.alpha)
 
 
-class Substrate(eqx.Module):
+class ExitMedium(eqx.Module):
+    r"""What lies under the last layer — the interface every exit medium implements.
+
+    Narrow on purpose (like optimistix's ``AbstractSearch``): the recursion needs of an exit only
+    its index and, for a body that sends light back diffusely, its internal diffuse reflectance
+    :math:`\rho_g(\lambda)` (Simonot et al. §4: the probability that light which crossed the
+    binder interface into the body comes back, Lambertian). An exit *lowers itself* to these on a
+    wavelength grid (:meth:`lower`); how it computes ρg (a given spectrum, Kubelka's solution for
+    a scattering layer over a ground …) is its own business.
+
+    Attributes:
+        index: the index of the medium the light enters from the last layer (a diffusing body's
+            binder; real for a diffusing body: light is integrated over angles in it).
+        diffuse: class constant — True if the body returns light diffusely (it lowers to a ρg),
+            False for a specular exit (it lowers to None).
+        table: class constant — the stack-file table that declares this exit (``substrate``,
+            ``background`` …).
+        label: class constant — how messages and plot titles name it.
+    """
+
+    index: eqx.AbstractVar[Material]
+    diffuse: eqx.AbstractClassVar[bool]
+    table: eqx.AbstractClassVar[str]
+    label: eqx.AbstractClassVar[str]
+
+    @abc.abstractmethod
+    def lower(self, wavelength_nm) -> Optional[RealLike]:
+        r"""The internal diffuse reflectance :math:`\rho_g` on ``wavelength_nm`` (nm, ``(wl,)``),
+        dimensionless in [0, 1], broadcastable to ``(*batch, wl)``; None for a specular exit.
+        Traced inputs are checked here (``equinox.error_if``); concrete ones at construction."""
+
+
+class Substrate(ExitMedium):
     """Specular semi-infinite exit medium (glass, silicon, a bulk metal …).
 
     Attributes:
@@ -74,10 +114,16 @@ class Substrate(eqx.Module):
             broadcastable to ``(*batch, wl)``. Absorbing (k > 0) is allowed here.
     """
 
-    index: Material = eqx.field(converter=as_material)
+    index: Material = leaf(converter=as_material)
+    diffuse: ClassVar[bool] = False
+    table: ClassVar[str] = "substrate"
+    label: ClassVar[str] = "substrate"
+
+    def lower(self, wavelength_nm) -> None:
+        return None
 
 
-class LambertianBackground(eqx.Module):
+class LambertianBackground(ExitMedium):
     r"""Lambertian diffusing background under the stack (Simonot et al. §4).
 
     Attributes:
@@ -86,15 +132,18 @@ class LambertianBackground(eqx.Module):
             wavelength grid, or a :class:`~layerstack_jax.Tabulated`-like spectrum (callable).
     """
 
-    index: Material = eqx.field(converter=as_material)
-    reflectance: RealSpectrumLike
+    index: Material = leaf(converter=as_material)
+    reflectance: RealSpectrumLike = leaf(spectral=True, fixed_optics=True, per_wavelength=True, file_key="rho_g")
+    diffuse: ClassVar[bool] = True
+    table: ClassVar[str] = "background"
+    label: ClassVar[str] = "Lambertian background"
 
     def __check_init__(self):
         if not callable(self.reflectance):
             check_unit_interval("background reflectance rho_g", self.reflectance)
 
-
-Exit = Union[Substrate, LambertianBackground]
+    def lower(self, wavelength_nm):
+        return as_spectrum(self.reflectance, wavelength_nm)
 
 
 class Stack(eqx.Module):
@@ -104,19 +153,20 @@ class Stack(eqx.Module):
     ...       exit=LambertianBackground(1.5, 0.8))  # doctest: +SKIP
     """
 
-    ambient: Material = eqx.field(converter=as_material)
+    ambient: Material = leaf(converter=as_material)
     layers: tuple = eqx.field(converter=tuple)
-    exit: Exit
+    exit: ExitMedium
 
     def __check_init__(self):
         for i, layer in enumerate(self.layers):
             if not isinstance(layer, Layer):
                 raise LayerstackError(f"layers[{i}] is not a Layer: {layer!r}")
-        if not isinstance(self.exit, (Substrate, LambertianBackground)):
-            raise LayerstackError("exit must be a Substrate or a LambertianBackground")
+        if not isinstance(self.exit, ExitMedium):
+            raise LayerstackError("exit must be an exit medium (a Substrate, a LambertianBackground, a KubelkaMunk "
+                                  f"body …), got {self.exit!r}")
         for name, mat in (("ambient", self.ambient), ("exit", self.exit.index)):
             if isinstance(mat, Index) and is_concrete(mat.k) and np.any(np.asarray(mat.k) != 0):
-                if name == "ambient" or isinstance(self.exit, LambertianBackground):
+                if name == "ambient" or self.exit.diffuse:
                     raise LayerstackError(f"{name} index must be real (k = 0): light is incident from / integrated in it")
 
     @property
@@ -248,9 +298,9 @@ def resolve(stack: Stack, wavelength_nm) -> ResolvedStack:
                                                    stack.exit.index)))
     ]
     _warn_implausible(stack, wl, n)
-    rho_g = None
-    if isinstance(stack.exit, LambertianBackground):
-        rho_g = _on_grid("background reflectance rho_g", as_spectrum(stack.exit.reflectance, wl), wl)
+    rho_g = stack.exit.lower(wl)
+    if rho_g is not None:
+        rho_g = _on_grid("background reflectance rho_g", rho_g, wl)
         rho_g = check_unit_interval("background reflectance rho_g", rho_g, pending=checks, key=("rho_g",))
     d, alpha = [], []
     for i, layer in enumerate(stack.layers):

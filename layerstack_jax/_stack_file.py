@@ -21,6 +21,8 @@ from ._effective_medium import Bruggeman, Looyenga
 from ._materials import Cauchy, Index, Material, Sellmeier, Tabulated
 from ._oscillators import CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
 from ._spectra_csv import read_csv_columns
+from ._kubelka_munk import KubelkaMunk, Mixture, Paint
+from ._leaves import file_fields
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
 from ._validate import LayerstackError, is_concrete
 
@@ -28,13 +30,15 @@ __all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material"
            "load_fit_stack", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
            "save_stack"]
 
-_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "instrument")
+_TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "kubelka_munk", "instrument")
 #: keys of ``[instrument]`` that are not numbers: which layer a thickness spread applies to
 _INSTRUMENT_STATIC = ("nonuniform_layer",)
 _LAYER_KEYS = ("name", "n", "k", "thickness_nm", "coherent", "alpha_per_nm")
 _SUBSTRATE_KEYS = ("n", "k")
 _BACKGROUND_KEYS = ("n", "rho_g")
 _AMBIENT_KEYS = ("n",)
+_KUBELKA_MUNK_KEYS = ("n", "thickness_nm", "ground_reflectance", "K_per_nm", "S_per_nm", "pigments")
+_PIGMENT_KEYS = ("name", "K_per_nm", "S_per_nm", "concentration")
 #: Dispersion models read by name, their coefficients by field name, each a number, a list
 #: (one per oscillator) or a free-parameter table: ``n = { tauc_lorentz = { Eg = 3.2, A = {
 #: value = 150, free = true, min = 10, max = 500 }, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }``.
@@ -421,6 +425,55 @@ def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index
     return Layer(index, thickness, coherent=coherent, alpha=alpha, name=name)
 
 
+def _kubelka_munk(source: str, km: Mapping, base_dir: Path, free: Optional[list]) -> KubelkaMunk:
+    """The ``[kubelka_munk]`` table: a scattering body under the binder of index ``n`` —
+    ``K_per_nm``, ``S_per_nm`` (numbers or spectra, 1/nm) or ``[[kubelka_munk.pigments]]`` (each
+    with its K, S and a ``concentration``: Duncan's mixture), ``thickness_nm`` (absent: opaque),
+    ``ground_reflectance`` (number or spectrum in [0, 1], default 0). ``thickness_nm``,
+    ``ground_reflectance`` and each ``concentration`` may be free."""
+    where = FileLocation(source, "[kubelka_munk]")
+    reject_unknown_keys(where, km, _KUBELKA_MUNK_KEYS)
+    index = read_material(where, km, base_dir, allow_k=False, label="kubelka_munk n")
+    thickness = None
+    if "thickness_nm" in km:
+        spec = _split_free(where, "thickness_nm", km["thickness_nm"], ("exit", "thickness"), "thickness", free,
+                           spectral=False)
+        thickness = read_number(where, "thickness_nm", spec, minimum=0.0, what="nm")
+    ground = 0.0
+    if "ground_reflectance" in km:
+        spec = _split_free(where, "ground_reflectance", km["ground_reflectance"], ("exit", "ground"), "rho_g", free,
+                           spectral=True)
+        ground = _spectrum(where, "ground_reflectance", spec, base_dir, "ground_reflectance",
+                           "kubelka_munk ground reflectance", lo=0.0, hi=1.0)
+
+    def constants(w: FileLocation, t: Mapping, label: str):
+        for key in ("K_per_nm", "S_per_nm"):
+            if key not in t:
+                raise w.error(f"missing ({'absorption K' if key[0] == 'K' else 'scattering S'} in 1/nm)", key)
+        return [_spectrum(w, key, t[key], base_dir, key, f"{label} {key[0]}", lo=0.0, hi=None)
+                for key in ("K_per_nm", "S_per_nm")]
+
+    if "pigments" in km:
+        if "K_per_nm" in km or "S_per_nm" in km:
+            raise where.error("give K_per_nm and S_per_nm, or [[kubelka_munk.pigments]], not both", "pigments")
+        pigments, concentrations = [], []
+        for i, (t, name, w) in enumerate(named_tables(source, km["pigments"], "kubelka_munk.pigments", "pigment")):
+            reject_unknown_keys(w, t, _PIGMENT_KEYS)
+            pigments.append(Paint(*constants(w, t, f"pigment {name!r}"), name=name))
+            if "concentration" not in t:
+                raise w.error("missing (the pigment's concentration in the mixture)", "concentration")
+            before = len(free) if free is not None else 0
+            spec = _split_free(w, "concentration", t["concentration"], ("exit", "paint", "concentrations", i),
+                               "thickness", free, spectral=False)  # kind "thickness": bounds [0, inf)
+            if free is not None and len(free) > before:
+                free[-1] = free[-1]._replace(name=f"concentration[{name}]")
+            concentrations.append(read_number(w, "concentration", spec, minimum=0.0))
+        paint = Mixture(np.asarray(concentrations), pigments)
+    else:
+        paint = Paint(*constants(where, km, "kubelka_munk"))
+    return KubelkaMunk(index, paint, thickness, ground)
+
+
 # ------------------------------------------------------------------------------ stacks
 def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", free: Optional[list] = None) -> Stack:
     """Build a :class:`Stack` from the parsed contents of a stack file (schema: module docstring).
@@ -463,12 +516,16 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
         layers = [_layer(where, t, base_dir, name, i, free)
                   for i, (t, name, where) in enumerate(named_tables(source, d.get("layers", []), "layers", "layer"))]
 
-        has_sub, has_bg = "substrate" in d, "background" in d
-        if has_sub and has_bg:
-            raise top.error("give either [substrate] (specular) or [background] (Lambertian), not both")
-        if not (has_sub or has_bg):
-            raise top.error("missing the exit medium: add a [substrate] (specular) or a [background] (Lambertian) table")
-        if has_sub:
+        has_sub, has_bg, has_km = "substrate" in d, "background" in d, "kubelka_munk" in d
+        if has_sub + has_bg + has_km > 1:
+            raise top.error("give either [substrate] (specular), [background] (Lambertian) or [kubelka_munk] "
+                            "(a scattering body), not both")
+        if not (has_sub or has_bg or has_km):
+            raise top.error("missing the exit medium: add a [substrate] (specular) or a [background] (Lambertian) "
+                            "table, or a [kubelka_munk] scattering body")
+        if has_km:
+            exit_ = _kubelka_munk(source, _table("kubelka_munk"), base_dir, free)
+        elif has_sub:
             where = FileLocation(source, "[substrate]")
             sub = _table("substrate")
             reject_unknown_keys(where, sub, _SUBSTRATE_KEYS)
@@ -679,13 +736,18 @@ def stack_to_dict(stack: Stack) -> dict:
             t["alpha_per_nm"] = _spectrum_to_dict(layer.alpha, f"layer {i + 1} alpha")
         layers.append(t)
     d["layers"] = layers
-    if isinstance(stack.exit, Substrate):
-        d["substrate"] = {}
-        _material_to_dict(stack.exit.index, "substrate", d["substrate"])
-    else:
-        d["background"] = {}
-        _material_to_dict(stack.exit.index, "background", d["background"])
-        d["background"]["rho_g"] = _spectrum_to_dict(stack.exit.reflectance, "background rho_g")
+    table = stack.exit.table  # the exit's own table; its numbers under the keys its fields declare
+    d[table] = {}
+    _material_to_dict(stack.exit.index, table, d[table])
+    keys = {field: key for key, field in file_fields(stack.exit).items()}
+    for f in dataclasses.fields(stack.exit):
+        value = getattr(stack.exit, f.name)
+        if f.name == "index" or f.metadata.get("static") or value is None:
+            continue
+        if f.name not in keys:
+            raise LayerstackError(f"stack_to_dict: the [{table}] field {f.name!r} has no stack-file form here; "
+                                  "write this stack's file by hand")
+        d[table][keys[f.name]] = _spectrum_to_dict(value, f"{table} {keys[f.name]}")
     return d
 
 

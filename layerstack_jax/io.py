@@ -32,8 +32,18 @@ memory, :func:`stack_from_dict`). Layers are listed from the side the light come
                               # (columns wavelength_nm, rho_g) or inline
                               # { wavelength_nm = [...], values = [...] }
 
+    [kubelka_munk]            # ... or a scattering body (paint, ink, paper) under its binder:
+    n = 1.5                   # real index of the binder
+    thickness_nm = 30000      # optional: absent = opaque (R infinity)
+    ground_reflectance = 0.8  # optional diffuse reflectance under the body (number or spectrum; 0)
+    K_per_nm = 1e-5           # Kubelka-Munk absorption K and scattering S in 1/nm (numbers or
+    S_per_nm = 5e-4           # spectra as alpha_per_nm) ... or a Duncan mixture of pigments:
+    # [[kubelka_munk.pigments]]   name = "red", K_per_nm = ..., S_per_nm = ..., concentration = 0.4
+    # (exactly one exit table: [substrate], [background] or [kubelka_munk]; layerstack_jax.KubelkaMunk)
+
 Free parameters (for ``layerstack fit``; read by :func:`load_fit_stack` into :class:`FreeDeclaration` records): a layer's ``thickness_nm``, ``alpha_per_nm``, ``n`` and
-``k`` (numbers) and the background's ``rho_g`` may be written as an inline table that adds
+``k`` (numbers), the background's ``rho_g`` and a Kubelka–Munk body's ``thickness_nm``,
+``ground_reflectance`` and pigment ``concentration`` s may be written as an inline table that adds
 fitting information to the value::
 
     thickness_nm = { value = 30000, free = true, min = 0, max = 1e5 }

@@ -112,3 +112,66 @@ def test_no_private_attributes_of_optimistix_equinox_jaxopt():
                 if _PRIVATE.search(code):
                     bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
     assert not bad, "\n".join(bad)
+
+
+def _exit_classes() -> dict:
+    """Every exit medium the library defines (subclasses of ``ExitMedium``) -> its module's file name."""
+    import layerstack_jax as ls
+
+    found, todo = {}, [ls.ExitMedium]
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        found[cls.__name__] = Path(__import__("sys").modules[cls.__module__].__file__).name
+    return found
+
+
+def test_no_code_asks_which_class_an_exit_is():
+    """The exit-medium seam (issue 28): code outside an exit's own module never asks for its class
+    (``isinstance(x, Substrate)``, ``isinstance(stack.exit, …)``, ``type(stack.exit)``); it asks the
+    interface (``diffuse``, ``lower``, ``table``, ``label``) or the resolved stack (``rho_g``).
+    Only the interface itself may be named (``isinstance(exit, ExitMedium)``: is this an exit?)."""
+    classes = _exit_classes()
+    interface = "ExitMedium"
+    assert {"Substrate", "LambertianBackground"} <= set(classes)
+    bad = []
+    for package in PACKAGES:
+        for module, path in _modules(package).items():
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if not isinstance(node, ast.Call):
+                    continue
+                fn = getattr(node.func, "id", None)
+                if fn == "isinstance" and len(node.args) == 2:
+                    names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
+                    names |= {n.attr for n in ast.walk(node.args[1]) if isinstance(n, ast.Attribute)}
+                    subject = ast.unparse(node.args[0])
+                    for cls in names & (set(classes) - {interface}):
+                        if package != "layerstack_jax" or path.name != classes[cls]:
+                            bad.append(f"{path.relative_to(ROOT)}:{node.lineno} isinstance(..., {cls})")
+                    if "exit" in subject and names - {interface}:
+                        bad.append(f"{path.relative_to(ROOT)}:{node.lineno} isinstance({subject}, ...)")
+                if fn == "type" and node.args and "exit" in ast.unparse(node.args[0]):
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno} type({ast.unparse(node.args[0])})")
+    assert not bad, "\n".join(bad)
+
+
+_ROLE_TABLE = re.compile(r"""\(\s*["'](Layer|Index|Cauchy|Sellmeier|LambertianBackground|Substrate|Tabulated)["']\s*,\s*["']\w+["']\s*\)""")
+
+
+def test_leaf_roles_come_from_field_declarations_only():
+    """Leaf roles (batch axes, fixed optics, per-wavelength fit, stack-file key) are declared on the
+    fields (``layerstack_jax._leaves.leaf``), not kept in tables elsewhere: no ``("Layer",
+    "thickness")``-style (class name, field) pairs and no path tests on ``"reflectance"`` /
+    ``"alpha"`` fields outside the modules that define them."""
+    bad = []
+    for package in PACKAGES:
+        for module, path in _modules(package).items():
+            text = path.read_text(encoding="utf-8")
+            for i, line in enumerate(text.splitlines(), 1):
+                code = line.split("#", 1)[0]
+                if _ROLE_TABLE.search(code):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+                if re.search(r"""\[\s*["']exit["']\s*,\s*["']reflectance["']\s*\]|==\s*\(\s*["']exit["']\s*,\s*["']reflectance["']\s*\)""", code):
+                    bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert not bad, "\n".join(bad)

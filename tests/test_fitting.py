@@ -405,7 +405,7 @@ def test_bad_parameters():
         ft.Objective(_slab(1.0, 1e-5), WL, ds, [ft.Parameter(("layers", 0, "thicknes"))])
     with pytest.raises(ls.LayerstackError, match=r"index \(Index\) has no field 'A'"):
         ft.Objective(_slab(1.0, 1e-5), WL, ds, [ft.dispersion("slab", "A")])
-    with pytest.raises(ls.LayerstackError, match="specular substrate, no background rho_g"):
+    with pytest.raises(ls.LayerstackError, match="exit is a substrate, has no field .reflectance."):
         ft.Objective(_slab(1.0, 1e-5), WL, ds, [ft.rho_g()])
     with pytest.raises(ls.LayerstackError, match=r"bounds inverted .*lower 5 >= upper 1"):
         ft.Objective(_slab(1.0, 1e-5), WL, ds, [ft.thickness("slab", lower=5.0, upper=1.0)])

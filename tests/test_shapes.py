@@ -133,6 +133,11 @@ NOT_SPECTRA = {
     "save_spectra_csv": "files", "save_stack": "files", "stack_from_dict": "files", "stack_to_dict": "files",
     "write_measurement_csv": "files", "memory_budget": "memory for chunk='auto' (test_auto_chunks)",
     "use_compilation_cache": "configuration (test_programs)", "compilation_cache_dir": "a path (test_programs)",
+    "file_fields": "leaf roles (test_exit_seam)", "leaf": "field declaration", "leaf_role_at": "leaf roles",
+    "optics_fixed_at": "leaf roles", "replace_at": "returns a Stack", "stack_leaves": "leaf roles",
+    "km_reflectance": "Kubelka-Munk closed forms of given K, S, X (test_kubelka_munk)",
+    "km_transmittance": "Kubelka-Munk closed forms", "km_r_infinity": "Kubelka-Munk closed forms",
+    "k_over_s": "Kubelka-Munk closed forms", "layered": "Kubelka-Munk closed forms",
 }
 
 CASES = [(name, kind, angle) for name in (*ARRAY_RETURNING, *TUPLE_RETURNING)

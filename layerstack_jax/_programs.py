@@ -45,6 +45,10 @@ __all__ = ["public_program", "use_compilation_cache", "compilation_cache_dir", "
 #: Size limit of the compiled programs kept on disk (JAX evicts the least recently used first).
 CACHE_MAX_BYTES = 2 ** 30
 
+#: Programs that compiled faster than this are not kept on disk (JAX's default, 1 s, would skip the
+#: ~0.5–1 s programs of single public calls, whose first call the cache is meant to spare).
+CACHE_MIN_COMPILE_SECONDS = 0.2
+
 #: Programs kept in memory per public function (least recently used dropped first).
 _PROGRAMS_PER_FUNCTION = 64
 
@@ -65,18 +69,21 @@ def compilation_cache_dir() -> str:
 def use_compilation_cache() -> None:
     """Turn on JAX's persistent compilation cache in :func:`compilation_cache_dir` (size-limited
     to :data:`CACHE_MAX_BYTES`), unless a cache directory is configured already or
-    ``LAYERSTACK_CACHE_DIR`` is empty.
+    ``LAYERSTACK_CACHE_DIR`` is empty. Programs that took at least
+    :data:`CACHE_MIN_COMPILE_SECONDS` to compile are kept (unless
+    ``jax_persistent_cache_min_compile_time_secs`` was changed from JAX's default).
 
     A new process then loads the programs an earlier one compiled for the same model structure
-    instead of compiling them again. JAX stores programs that took at least
-    ``jax_persistent_cache_min_compile_time_secs`` to compile, keyed by the program, the JAX
-    version and the compile options, so a stale entry is never used."""
+    instead of compiling them again, keyed by the program, the JAX version and the compile
+    options, so a stale entry is never used."""
     path = compilation_cache_dir()
     with _cache_lock:
         if not path or jax.config.jax_compilation_cache_dir is not None:
             return
         jax.config.update("jax_compilation_cache_dir", path)
         jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
+        if jax.config.jax_persistent_cache_min_compile_time_secs == 1.0:  # JAX's default: a public program
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_SECONDS)
 
 
 def _is_traced_leaf(x) -> bool:

@@ -10,13 +10,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Optional
 
 import equinox as eqx
-import numpy as np
 
 from ._custom_types import Array, Float, IndexSpectrum, RealLike
 from ._quadrature import DEFAULT_NODES
 from ._response import Interfaces
 from ._stack import ResolvedStack
-from ._validate import LayerstackError, is_concrete
+from ._validate import LayerstackError, check_agree
 
 if TYPE_CHECKING:  # _geometry imports this module: the annotation only, no import at run time
     from ._geometry import Geometry
@@ -79,8 +78,5 @@ def check_optics(optics: Optics, rs: ResolvedStack, geometry, nodes: int) -> Non
     if len(optics.index) != len(rs.n) or len(optics.films) != len(coherent_films(rs)):
         raise LayerstackError("optics were made for a stack of another structure")
     for what, a, b in pairs:
-        if is_concrete((a, b)) and not np.allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=0):
-            raise LayerstackError(
-                f"optics were made with another {what}: rebuild them with fixed_optics() "
-                "(only thick-layer thicknesses, alpha and rho_g may change)"
-            )
+        check_agree(f"optics were made with another {what}: rebuild them with fixed_optics() "
+                    "(only thick-layer thicknesses, alpha and rho_g may change)", a, b, rtol=1e-12)

@@ -46,6 +46,7 @@ __all__ = [
     "warn_if_implausible",
     "warn_if",
     "warn_if_radians",
+    "check_agree",
     "value_text",
     "ProgramChecks",
     "collecting_checks",
@@ -275,3 +276,17 @@ def warn_if_radians(name: str, angle_deg) -> None:
     warn_if_implausible(name, angle_deg,
                         lambda a, xp: (xp.max(a) > 0) & (xp.max(a) <= xp.pi / 2) & xp.any(a != xp.round(a)),
                         "all within (0, pi/2] and not whole degrees: radians given? angles are in degrees")
+
+
+def check_agree(message: str, a, b, *, rtol: float) -> None:
+    """Raise ``LayerstackError(message)`` unless ``a`` and ``b`` agree within ``rtol``
+    (``|a − b| ≤ rtol |b|``, as ``numpy.allclose`` with ``atol=0``). Concrete values: at once;
+    traced while a public program is traced: a check output of the program; traced elsewhere:
+    not checked."""
+    if is_concrete((a, b)):
+        if not np.allclose(np.asarray(a), np.asarray(b), rtol=rtol, atol=0):
+            raise LayerstackError(message)
+        return
+    collector = _PROGRAM_CHECKS.get()
+    if collector is not None and _TRACED_CHECKS.get():
+        collector.errors.append(jnp.any(jnp.abs(jnp.asarray(a) - jnp.asarray(b)) > rtol * jnp.abs(jnp.asarray(b))))

@@ -263,12 +263,14 @@ def _write_batch(path: Path, wavelength, batch: _Batch) -> str:
     suffix = path.suffix.lower()
     n = batch.values.shape[0]
     path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".npy":  # filled geometry by geometry: no second copy of the spectra in memory
-        out = np.lib.format.open_memmap(path, mode="w+", dtype=float, shape=(len(batch.spectra), n, np.size(wavelength)))
-        for i, g in enumerate(batch.spectra):
-            out[i] = batch.spectra[g]
-        out.flush()
-        return f"array (geometry, sample, wavelength) = {out.shape}"
+    if suffix == ".npy":  # written geometry by geometry: no second copy of the spectra in memory
+        shape = (len(batch.spectra), n, np.size(wavelength))
+        with open(path, "wb") as f:
+            np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(np.dtype(float)),
+                                                     "fortran_order": False, "shape": shape})
+            for g in batch.spectra:
+                np.ascontiguousarray(batch.spectra[g], dtype=float).tofile(f)
+        return f"array (geometry, sample, wavelength) = {shape}"
     described = f"{n} samples x {len(batch.spectra)} geometries"
     if suffix == ".npz":
         arrays = {f"reading_{i}": batch.spectra[g] for i, g in enumerate(batch.spectra)}

@@ -46,9 +46,9 @@ with probability :math:`P_s(\mu_v) = \bar k_r(\mu_v) / (\bar k_r(\mu_v) + \bar a
 for the delta lobe, where bars are means over the table's wavelengths and
 :math:`a(\mu_v) = \int k_d(\omega_l \to \omega_v) \cos\theta_l\, d\omega_l` is the
 albedo of :math:`k_d` seen from the view direction. The diffuse lobe is drawn from a
-piecewise-constant density over (cos θ_l, Δφ) cells, built per *view* node from
-:math:`\bar k_d\cos\theta_l` and mixed stochastically between the two nodes that bracket
-:math:`\mu_v` (an exact mixture, whose pdf is the same mixture of the two densities), with a
+piecewise-constant density over (cos θ_l, Δφ) cells (each table cell cut into ``SPLIT`` ×
+``SPLIT``), built per *view* node from :math:`\bar k_d\cos\theta_l` and mixed
+stochastically between the two nodes that bracket :math:`\mu_v` (an exact mixture, whose pdf is the same mixture of the two densities), with a
 defensive share ``DEFENSIVE`` of cosine-weighted sampling so that the pdf is positive wherever
 :math:`k_d` may be. Any orientation may be evaluated with this density (it is positive
 everywhere): only its efficiency depends on how well it follows the integrand.
@@ -70,6 +70,9 @@ __all__ = ["CoatingTables", "TableSurface", "SurfaceArrays", "DEFENSIVE"]
 
 #: Share of cosine-weighted directions in the sampling of the diffuse lobe.
 DEFENSIVE = 0.1
+#: Sampling cells per table cell along each axis (the density then follows the multilinear
+#: interpolation of the table, not only its values at the cell centres).
+SPLIT = 4
 
 _FIELDS = ("wavelength_nm", "cos_theta", "k_r", "k_t", "phi_out", "cos_theta_out", "k_d")
 
@@ -146,12 +149,18 @@ class _LobeDistribution(NamedTuple):
     albedo: list  # per conditioning node: albedo of the λ-mean k_d over the sampled directions
 
 
-def _cells(cos_o: np.ndarray, phi: np.ndarray):
+def _refined(edges: np.ndarray, split: int) -> np.ndarray:
+    """``edges`` with each interval cut into ``split`` equal parts."""
+    parts = [np.linspace(a, b, split + 1)[:-1] for a, b in zip(edges[:-1], edges[1:])]
+    return np.concatenate(parts + [edges[-1:]])
+
+
+def _cells(cos_o: np.ndarray, phi: np.ndarray, split: int = 1):
     """Cell edges of the lobe's sampling grid: between the nodes of the outgoing grid, extended
-    to cos θo ∈ [0, 1] and Δφ ∈ [0, π]."""
+    to cos θo ∈ [0, 1] and Δφ ∈ [0, π], each interval cut into ``split`` parts."""
     mu_edges = np.unique(np.concatenate([[0.0], cos_o[(cos_o > 0) & (cos_o < 1)], [1.0]]))
     phi_edges = np.unique(np.concatenate([[0.0], phi[(phi > 0) & (phi < np.pi)], [np.pi]]))
-    return mu_edges, phi_edges
+    return _refined(mu_edges, split), _refined(phi_edges, split)
 
 
 def _cell_weights(cos_o: np.ndarray, phi: np.ndarray, table: np.ndarray, mu_edges, phi_edges) -> np.ndarray:
@@ -170,7 +179,7 @@ def _lobe_distribution(cos_o: np.ndarray, phi: np.ndarray, kd_mean: np.ndarray) 
     """Piecewise-constant sampling densities of :math:`\bar k_d \cos\theta_o` per incidence node
     (``kd_mean``: ``(A, B, P)``), with cells from :func:`_cells`; the value in a cell is the
     λ-mean BRDF at its centre (bilinear, clamped) times its mean cos θo."""
-    mu_edges, phi_edges = _cells(cos_o, phi)
+    mu_edges, phi_edges = _cells(cos_o, phi, SPLIT)
     d_mu, d_phi = np.diff(mu_edges), np.diff(phi_edges)
     cos_o, kd_mean = _padded(cos_o, kd_mean, 1)
     phi, kd_mean = _padded(phi, kd_mean, 2)

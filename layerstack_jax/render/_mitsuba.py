@@ -394,7 +394,7 @@ def coated_bsdf(tables, *, variant: str | None = None, timings: dict | None = No
     Returns:
         A ``mi.BSDF`` to put in a scene dictionary (``"bsdf": coated_bsdf(tables)``). In a
         vectorized variant its parameters ``k_r`` and ``k_d`` (``mi.traverse``) are the flat tables,
-        differentiable.
+        differentiable (:func:`layerstack_jax.render.render_vjp`).
     """
     mi, _ = import_mitsuba()  # first: without the extra, say how to install it
     surface = TableSurface(tables)

@@ -486,9 +486,9 @@ def test_image_gradient_matches_central_differences(case):
     JAX's VJP of the tables (render_vjp), against central differences of rendered images with the
     same seed. With the same seed the paths do not move (the sampling densities are fixed), so
     the difference quotient is the derivative of the same Monte-Carlo estimate: what separates
-    them is the quotient's truncation (O(h²); h = 0.5 nm: measured ~1e-3 of the derivative) and
-    float32 rounding, far below the gradient's own Monte-Carlo error — the spread between two
-    seeds, asserted to be larger than the tolerance so that the comparison is not vacuous."""
+    them is the quotient's truncation (O(h²), h = 0.5 nm) and float32 rounding, far below the
+    gradient's own Monte-Carlo error — the spread between two seeds, asserted to be larger than
+    the tolerance (3e-3) so that the comparison is not vacuous."""
     from layerstack_jax._render_tables import angle_grid
     from layerstack_jax.render import coating_table_values, render_vjp
 
@@ -530,7 +530,7 @@ def test_image_gradient_matches_central_differences(case):
     finally:
         mi.set_variant("scalar_spectral")
     assert np.all(np.isfinite(img)) and img.mean() > 0
-    tol = 1e-2 * abs(fd)
+    tol = 3e-3 * abs(fd)  # measured: 1.2e-4 (thickness), 5e-5 (σ0); seeds differ by 10 % and 2 %
     assert abs(g - fd) < tol, (g, fd)
     assert abs(g - g_other) > tol, (g, g_other)  # the Monte-Carlo error of the gradient exceeds the tolerance
 

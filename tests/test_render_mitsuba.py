@@ -253,6 +253,10 @@ def test_missing_llvm_is_one_sentence_not_an_abort(monkeypatch):
         coated_bsdf(_smooth_tables(), variant="llvm_ad_spectral")
     monkeypatch.setenv("DRJIT_LIBLLVM_PATH", "/nonexistent/libLLVM.so")
     assert "does not exist" in _llvm.llvm_problem()
+    # library names: Debian's libLLVM.so.19.1 and libLLVM-15.so.1, llvm-19/lib/libLLVM.so.1 (ABI number 1)
+    versions = [_llvm._version(p) for p in ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1", "/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1",
+                                            "/usr/lib/llvm-19/lib/libLLVM.so.1")]
+    assert versions == [19, 15, 19]
 
 
 @pytest.mark.parametrize("variant_polarized", [v + "_polarized" for v in VARIANTS])

@@ -38,9 +38,9 @@ def _version(path: str) -> int | None:
     name = os.path.basename(path)
     for pattern in (r"libLLVM\.so\.(\d+)", r"libLLVM-(\d+)", r"libLLVM\.(\d+)\.dylib"):
         m = re.search(pattern, name)
-        if m:
+        if m and int(m.group(1)) >= 4:  # not the soname's ABI number (llvm-19/lib/libLLVM.so.1)
             return int(m.group(1))
-    m = re.search(r"llvm-?(\d+)", path)
+    m = re.search(r"llvm-?(\d+)", os.path.dirname(path))
     return int(m.group(1)) if m else None
 
 

@@ -260,7 +260,7 @@ def fig9_scene(teapot, cylinder, sphere, *, width: int = 192, height: int = 128,
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": int(max_depth)},
-        "sensor": camera(width, height, spp, origin=(0.0, -6.5, 2.2), target=(0.1, 0.3, 0.55), fov=30.0, sampler=sampler,
+        "sensor": camera(width, height, spp, origin=(0.0, -6.5, 2.2), target=(-0.05, 0.3, 0.55), fov=34.0, sampler=sampler,
                          lamp=lamp if spectrum_in_sensor else None),
         "teapot": {"type": "ply", "filename": _teapot_file(teapot_resolution),
                    "to_world": T().translate([-1.35, 0.0, 0.0]) @ T().rotate([0, 0, 1], -30.0) @ T().scale(0.8),

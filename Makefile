@@ -7,6 +7,11 @@ STAMP := $(VENV)/.installed
 .PHONY: demo test test-slow bench notebooks docs install clean
 
 $(STAMP): pyproject.toml
+	# Mitsuba's vectorized llvm_* variants need LLVM >= 17 for Dr.Jit (Debian 12's default LLVM 14/15 aborts):
+	# libllvm19 where apt-get can install it (as root); elsewhere the render tests run the scalar variants
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && ! ls /usr/lib/*/libLLVM.so.19* >/dev/null 2>&1; then \
+		apt-get install -y -q libllvm19 >/dev/null 2>&1 || (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libllvm19 >/dev/null 2>&1) \
+		|| echo "libllvm19 not installed: Mitsuba renders use the scalar variants"; fi
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test,readers,render,cube,docs]'

@@ -88,25 +88,51 @@ def _hemisphere_integral(fn, n_mu=200, n_phi=400):
     return total * (1.0 / n_mu) * (2 * np.pi / n_phi)
 
 
-@pytest.mark.parametrize("cos_i", [0.93, 0.4])
-def test_pdf_normalized_and_sampling_unbiased(cos_i):
+@pytest.mark.parametrize("cos_v", [0.93, 0.4])
+def test_pdf_normalized_and_sampling_unbiased(cos_v):
+    """The lobe is sampled for a light direction given the view: the pdf integrates to 1 over the
+    light's hemisphere, and the mean of k_d(light → view) cos θ_l / pdf over drawn light
+    directions is the albedo seen from the view (quadrature)."""
     t = _tables(seed=3, L=3)
     surf = TableSurface(t)
-    wi = _direction(cos_i, 0.7)
+    view = _direction(cos_v, 0.7)
     wls = [450.0, 550.0, 650.0]
-    norm = _hemisphere_integral(lambda wo: surf.lobe_pdf(wi, wo), 100, 200)
+    norm = _hemisphere_integral(lambda light: surf.lobe_pdf(view, light), 100, 200)
     assert norm == pytest.approx(1.0, abs=2e-3)
-    albedo = _hemisphere_integral(lambda wo: surf.brdf(wi, wo, wls)[1] * wo[2], 100, 200)
+    albedo = _hemisphere_integral(lambda light: surf.brdf(light, view, wls)[1] * light[2], 100, 200)
     rng = np.random.default_rng(4)
     n = 40000
     u = rng.random((n, 3))
     est = np.empty(n)
     for j in range(n):
-        wo = surf.sample_lobe(wi, u[j, 0], (u[j, 1], u[j, 2]))
-        pdf = surf.lobe_pdf(wi, wo)
-        est[j] = surf.brdf(wi, wo, wls)[1] * wo[2] / pdf if pdf > 0 else 0.0
+        light = surf.sample_lobe(view, u[j, 0], (u[j, 1], u[j, 2]))
+        pdf = surf.lobe_pdf(view, light)
+        est[j] = surf.brdf(light, view, wls)[1] * light[2] / pdf if pdf > 0 else 0.0
     sigma = est.std() / math.sqrt(n)
     assert abs(est.mean() - albedo) < 4 * sigma + 2e-3 * albedo
+
+
+def test_sampling_follows_the_light_given_the_view():
+    """For a table that depends on the light only through a narrow band of incidence angles
+    (k_d > 0 only for θ_l near 60°), every light direction drawn by the table part of the
+    sampler lies in that band, whatever the view: the density is built over the incidence axis."""
+    t = _tables(seed=5, A=10, B=6, P=5, L=3)
+    ct = np.cos(np.radians(np.linspace(85.0, 0.0, 10)))
+    band = np.abs(np.degrees(np.arccos(ct)) - 56.7) < 10.0
+    k_d = np.where(band[:, None, None, None], 0.05, 0.0) * np.ones((10, 6, 5, 3))
+    surf = TableSurface(t._replace(cos_theta=ct, k_d=k_d, k_r=np.zeros((10, 3)), k_t=np.zeros((10, 3)),
+                                   wavelength_nm=np.array([400.0, 550.0, 700.0])))
+    rng = np.random.default_rng(6)
+    lo, hi = ct[band].min(), ct[band].max()
+    cell = np.diff(ct).max()
+    for cos_v in (0.95, 0.5, 0.15):
+        view = _direction(cos_v, 0.2)
+        for _ in range(300):
+            u = rng.random(3)
+            u[0] = DEFENSIVE + (1 - DEFENSIVE) * u[0]  # the table part (not the cosine share)
+            light = surf.sample_lobe(view, u[0], (u[1], u[2]))
+            assert lo - cell <= light[2] <= hi + cell
+            assert surf.lobe_pdf(view, light) > 0
 
 
 def test_specular_probability_and_flags():
@@ -132,9 +158,9 @@ def test_single_node_grids():
     t = _tables(A=1, B=1, P=1, L=1)
     surf = TableSurface(t)
     assert surf.specular(0.3, [400.0, 700.0]) == pytest.approx([t.k_r[0, 0]] * 2)
-    wi, wo = _direction(0.9, 0.0), _direction(0.2, 2.0)
-    assert surf.brdf(wi, wo, [500.0]) == pytest.approx([t.k_d[0, 0, 0, 0]])
-    norm = _hemisphere_integral(lambda w: surf.lobe_pdf(wi, w), 400, 40)
+    light, view = _direction(0.9, 0.0), _direction(0.2, 2.0)
+    assert surf.brdf(light, view, [500.0]) == pytest.approx([t.k_d[0, 0, 0, 0]])
+    norm = _hemisphere_integral(lambda w: surf.lobe_pdf(view, w), 400, 40)
     assert norm == pytest.approx(1.0, abs=2e-3)
 
 

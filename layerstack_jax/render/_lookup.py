@@ -35,14 +35,23 @@ undefined and taken as 0.
 **Interpolation.** Linear in cos θ_i, cos θ_o, Δφ and λ (multilinear), clamped to the end
 values outside each grid (Mitsuba samples 360–830 nm; tables usually cover less).
 
-**Sampling.** Lobe choice with probability
-:math:`P_s(\mu_i) = \bar k_r / (\bar k_r + \bar a_d)` for the delta lobe, where bars are
-means over the table's wavelengths and :math:`a_d` is the directional albedo of
-:math:`k_d`. The diffuse lobe is drawn from a piecewise-constant density over
-(cos θ_o, Δφ) cells, built per incidence node from :math:`\bar k_d\cos\theta_o` and mixed
-stochastically between the two nodes that bracket :math:`\mu_i` (an exact mixture, whose pdf
-is the same mixture of the two densities), with a defensive share ``DEFENSIVE`` of
-cosine-weighted sampling so that the pdf is positive wherever :math:`k_d` may be.
+**Orientation.** The tables' incidence axis is the *light* (Hirayama's ω_l) and the outgoing
+axis the *viewer* (ω_i): :meth:`TableSurface.brdf` takes ``(light, view)``. A path tracer
+gathering radiance stands at the viewer's side: Mitsuba's ``si.wi`` points back along the path
+(towards the camera) and the direction it samples, ``wo``, towards the light. Literal-form
+tables (``form="literal"``) are not reciprocal, so the order matters.
+
+**Sampling** (what a radiance path tracer needs: a light direction given the view). Lobe choice
+with probability :math:`P_s(\mu_v) = \bar k_r(\mu_v) / (\bar k_r(\mu_v) + \bar a(\mu_v))`
+for the delta lobe, where bars are means over the table's wavelengths and
+:math:`a(\mu_v) = \int k_d(\omega_l \to \omega_v) \cos\theta_l\, d\omega_l` is the
+albedo of :math:`k_d` seen from the view direction. The diffuse lobe is drawn from a
+piecewise-constant density over (cos θ_l, Δφ) cells (each table cell cut into ``SPLIT`` ×
+``SPLIT``), built per *view* node from :math:`\bar k_d\cos\theta_l` and mixed
+stochastically between the two nodes that bracket :math:`\mu_v` (an exact mixture, whose pdf is the same mixture of the two densities), with a
+defensive share ``DEFENSIVE`` of cosine-weighted sampling so that the pdf is positive wherever
+:math:`k_d` may be. Any orientation may be evaluated with this density (it is positive
+everywhere): only its efficiency depends on how well it follows the integrand.
 """
 
 from __future__ import annotations
@@ -57,10 +66,13 @@ import numpy as np
 from .._render_tables import CoatingTables  # the one table type (re-exported here)
 from .._validate import LayerstackError
 
-__all__ = ["CoatingTables", "TableSurface", "DEFENSIVE"]
+__all__ = ["CoatingTables", "TableSurface", "SurfaceArrays", "DEFENSIVE"]
 
 #: Share of cosine-weighted directions in the sampling of the diffuse lobe.
 DEFENSIVE = 0.1
+#: Sampling cells per table cell along each axis (the density then follows the multilinear
+#: interpolation of the table, not only its values at the cell centres).
+SPLIT = 4
 
 _FIELDS = ("wavelength_nm", "cos_theta", "k_r", "k_t", "phi_out", "cos_theta_out", "k_d")
 
@@ -130,19 +142,25 @@ def _interp_mean(grid: np.ndarray, values: np.ndarray, x: np.ndarray) -> np.ndar
 
 
 class _LobeDistribution(NamedTuple):
-    mu_edges: list  # (Cb + 1,) cell edges in cos θo
+    mu_edges: list  # (Cb + 1,) cell edges in the sampled cosine
     phi_edges: list  # (Cp + 1,) cell edges in Δφ ∈ [0, π]
-    cdf: list  # per incidence node: (Cb * Cp,) cumulative probabilities (last = 1), or None
-    density: list  # per incidence node: (Cb * Cp,) solid-angle pdf of each cell, or None
-    albedo: list  # per incidence node: directional albedo of the λ-mean k_d
+    cdf: list  # per conditioning node: (Cb * Cp,) cumulative probabilities (last = 1), or None
+    density: list  # per conditioning node: (Cb * Cp,) solid-angle pdf of each cell, or None
+    albedo: list  # per conditioning node: albedo of the λ-mean k_d over the sampled directions
 
 
-def _cells(cos_o: np.ndarray, phi: np.ndarray):
+def _refined(edges: np.ndarray, split: int) -> np.ndarray:
+    """``edges`` with each interval cut into ``split`` equal parts."""
+    parts = [np.linspace(a, b, split + 1)[:-1] for a, b in zip(edges[:-1], edges[1:])]
+    return np.concatenate(parts + [edges[-1:]])
+
+
+def _cells(cos_o: np.ndarray, phi: np.ndarray, split: int = 1):
     """Cell edges of the lobe's sampling grid: between the nodes of the outgoing grid, extended
-    to cos θo ∈ [0, 1] and Δφ ∈ [0, π]."""
+    to cos θo ∈ [0, 1] and Δφ ∈ [0, π], each interval cut into ``split`` parts."""
     mu_edges = np.unique(np.concatenate([[0.0], cos_o[(cos_o > 0) & (cos_o < 1)], [1.0]]))
     phi_edges = np.unique(np.concatenate([[0.0], phi[(phi > 0) & (phi < np.pi)], [np.pi]]))
-    return mu_edges, phi_edges
+    return _refined(mu_edges, split), _refined(phi_edges, split)
 
 
 def _cell_weights(cos_o: np.ndarray, phi: np.ndarray, table: np.ndarray, mu_edges, phi_edges) -> np.ndarray:
@@ -161,7 +179,7 @@ def _lobe_distribution(cos_o: np.ndarray, phi: np.ndarray, kd_mean: np.ndarray) 
     """Piecewise-constant sampling densities of :math:`\bar k_d \cos\theta_o` per incidence node
     (``kd_mean``: ``(A, B, P)``), with cells from :func:`_cells`; the value in a cell is the
     λ-mean BRDF at its centre (bilinear, clamped) times its mean cos θo."""
-    mu_edges, phi_edges = _cells(cos_o, phi)
+    mu_edges, phi_edges = _cells(cos_o, phi, SPLIT)
     d_mu, d_phi = np.diff(mu_edges), np.diff(phi_edges)
     cos_o, kd_mean = _padded(cos_o, kd_mean, 1)
     phi, kd_mean = _padded(phi, kd_mean, 2)
@@ -222,24 +240,31 @@ class TableSurface:
             warnings.warn("tables.k_t is non-zero: the rendered surface is opaque, its transmittance is not rendered", stacklevel=2)
         self.has_specular = bool(np.any(k_r > 0))
         self.has_diffuse = bool(np.any(k_d > 0))
-        lobe = _lobe_distribution(cos_o, phi, k_d.mean(axis=-1))
         albedo_max = float(np.max(k_r + _albedo(cos_o, phi, k_d)))
         if albedo_max > 1.05:  # midpoint rule on the table grid: a few per cent high on coarse peaked lobes
             warnings.warn(f"tables: k_r + albedo of k_d reaches {albedo_max:.4f} > 1 (the surface creates energy)", stacklevel=2)
-        # pad one-node grids, then keep nested lists for fast scalar indexing
+        # sampling: light directions (the table's incidence grid) given the view (its outgoing grid)
+        lobe = _lobe_distribution(cos_t, phi, np.swapaxes(k_d.mean(axis=-1), 0, 1))
+        kr_at_view = _interp_mean(cos_t, k_r.mean(axis=-1), cos_o) if A > 1 else np.full(cos_o.size, k_r.mean())
+        alb = np.asarray(lobe.albedo)
+        p_spec = np.where(kr_at_view + alb > 0, kr_at_view / np.maximum(kr_at_view + alb, 1e-300), 0.0)
+        # pad one-node grids
         cos_t_p, k_r_p = _padded(cos_t, k_r, 0)
         _, k_d_p = _padded(cos_t, k_d, 0)
         wl_p, k_r_p = _padded(wl, k_r_p, 1)
         _, k_d_p = _padded(wl, k_d_p, 3)
         cos_o_p, k_d_p = _padded(cos_o, k_d_p, 1)
         phi_p, k_d_p = _padded(phi, k_d_p, 2)
+        _, p_spec = _padded(cos_o, p_spec, 0)
+        if cos_o.size == 1:
+            lobe = lobe._replace(cdf=lobe.cdf * 2, density=lobe.density * 2, albedo=lobe.albedo * 2)
+        #: the padded grids, tables and sampling data as numpy arrays (read by the vectorized plugin)
+        self.arrays = _surface_arrays(wl_p, cos_t_p, cos_o_p, phi_p, k_r_p, k_d_p, p_spec, lobe)
+        # nested lists for fast scalar indexing
         self._wl, self._cos_t, self._cos_o, self._phi = (g.tolist() for g in (wl_p, cos_t_p, cos_o_p, phi_p))
         self._k_r, self._k_d = k_r_p.tolist(), k_d_p.tolist()
-        kr_mean = k_r.mean(axis=-1)
-        alb = np.asarray(lobe.albedo)
-        self._p_spec_nodes = np.where(kr_mean + alb > 0, kr_mean / np.maximum(kr_mean + alb, 1e-300), 0.0)
-        self._p_spec_nodes = _padded(cos_t, self._p_spec_nodes, 0)[1].tolist()
-        self._lobe = lobe if A > 1 else lobe._replace(cdf=lobe.cdf * 2, density=lobe.density * 2, albedo=lobe.albedo * 2)
+        self._p_spec_nodes = p_spec.tolist()
+        self._lobe = lobe
         self.wavelength_range = (float(wl[0]), float(wl[-1]))
 
     # -- evaluation ---------------------------------------------------------------------------
@@ -260,14 +285,16 @@ class TableSurface:
             out.append(v0 + ta * (v1 - v0))
         return out
 
-    def brdf(self, wi, wo, wavelengths) -> list:
-        """Diffuse BRDF :math:`k_d` (1/sr) for outward unit directions ``wi``, ``wo`` (local frame,
-        z = normal) at each of ``wavelengths`` (nm); zeros unless both are above the surface."""
-        if wi[2] <= 0.0 or wo[2] <= 0.0 or not self.has_diffuse:
+    def brdf(self, light, view, wavelengths) -> list:
+        """Diffuse BRDF :math:`k_d(\\omega_l \\to \\omega_v)` (1/sr) from the light direction
+        ``light`` (the tables' incidence axis) to the view direction ``view`` (outward unit
+        vectors, local frame, z = normal) at each of ``wavelengths`` (nm); zeros unless both are
+        above the surface."""
+        if light[2] <= 0.0 or view[2] <= 0.0 or not self.has_diffuse:
             return [0.0] * len(wavelengths)
-        a, ta = _bracket(self._cos_t, wi[2])
-        b, tb = _bracket(self._cos_o, wo[2])
-        p, tp = _bracket(self._phi, _azimuth(wi, wo))
+        a, ta = _bracket(self._cos_t, light[2])
+        b, tb = _bracket(self._cos_o, view[2])
+        p, tp = _bracket(self._phi, _azimuth(light, view))
         kd = self._k_d
         corners = []
         for ia, wa in ((a, 1.0 - ta), (a + 1, ta)):
@@ -289,46 +316,48 @@ class TableSurface:
         return out
 
     # -- sampling -----------------------------------------------------------------------------
-    def specular_probability(self, cos_i: float) -> float:
-        """Probability of choosing the delta lobe at incidence cosine ``cos_i``."""
+    def specular_probability(self, cos_v: float) -> float:
+        """Probability of choosing the delta lobe at view cosine ``cos_v``."""
         if not self.has_diffuse:
             return 1.0
         if not self.has_specular:
             return 0.0
-        a, ta = _bracket(self._cos_t, cos_i)
+        a, ta = _bracket(self._cos_o, cos_v)
         p = self._p_spec_nodes
         return p[a] + ta * (p[a + 1] - p[a])
 
-    def _node_pdf(self, node: int, cos_o: float, dphi: float) -> float:
+    def _node_pdf(self, node: int, cos_l: float, dphi: float) -> float:
         density = self._lobe.density[node]
         if density is None:
-            return cos_o / math.pi
+            return cos_l / math.pi
         lobe = self._lobe
-        b = min(max(bisect_right(lobe.mu_edges, cos_o) - 1, 0), len(lobe.mu_edges) - 2)
+        b = min(max(bisect_right(lobe.mu_edges, cos_l) - 1, 0), len(lobe.mu_edges) - 2)
         p = min(max(bisect_right(lobe.phi_edges, dphi) - 1, 0), len(lobe.phi_edges) - 2)
         return density[b * (len(lobe.phi_edges) - 1) + p]
 
-    def lobe_pdf(self, wi, wo) -> float:
-        """Solid-angle pdf (1/sr) of drawing ``wo`` from the diffuse lobe given ``wi`` (the delta
-        lobe's choice probability not included)."""
-        if wi[2] <= 0.0 or wo[2] <= 0.0:
+    def lobe_pdf(self, view, light) -> float:
+        """Solid-angle pdf (1/sr) of drawing the light direction ``light`` from the diffuse lobe
+        given the view direction ``view`` (outward unit vectors; the delta lobe's choice
+        probability not included)."""
+        if view[2] <= 0.0 or light[2] <= 0.0:
             return 0.0
-        a, ta = _bracket(self._cos_t, wi[2])
-        dphi = _azimuth(wi, wo)
-        table = (1.0 - ta) * self._node_pdf(a, wo[2], dphi) if ta < 1.0 else 0.0
+        a, ta = _bracket(self._cos_o, view[2])
+        dphi = _azimuth(view, light)
+        table = (1.0 - ta) * self._node_pdf(a, light[2], dphi) if ta < 1.0 else 0.0
         if ta > 0.0:
-            table += ta * self._node_pdf(a + 1, wo[2], dphi)
-        return (1.0 - DEFENSIVE) * table + DEFENSIVE * wo[2] / math.pi
+            table += ta * self._node_pdf(a + 1, light[2], dphi)
+        return (1.0 - DEFENSIVE) * table + DEFENSIVE * light[2] / math.pi
 
-    def sample_lobe(self, wi, u: float, u2: tuple):
-        """Draw an outgoing direction from the diffuse lobe with uniform numbers ``u`` and
-        ``u2 = (x, y)`` in [0, 1); returns the unit vector ``(x, y, z)`` (local frame)."""
+    def sample_lobe(self, view, u: float, u2: tuple):
+        """Draw a light direction from the diffuse lobe given the view direction ``view``, with
+        uniform numbers ``u`` and ``u2 = (x, y)`` in [0, 1); returns the unit vector ``(x, y, z)``
+        (local frame)."""
         if u < DEFENSIVE:  # cosine-weighted hemisphere
             r = math.sqrt(u2[0])
             ph = 2.0 * math.pi * u2[1]
             return (r * math.cos(ph), r * math.sin(ph), math.sqrt(max(0.0, 1.0 - u2[0])))
         u = (u - DEFENSIVE) / (1.0 - DEFENSIVE)
-        a, ta = _bracket(self._cos_t, wi[2])
+        a, ta = _bracket(self._cos_o, view[2])
         node = a + 1 if u < ta else a
         cdf = self._lobe.cdf[node]
         if cdf is None:
@@ -346,6 +375,37 @@ class TableSurface:
         sign = 1.0 if y < 1.0 else -1.0
         y = y if y < 1.0 else y - 1.0
         dphi = lobe.phi_edges[p] + y * (lobe.phi_edges[p + 1] - lobe.phi_edges[p])
-        phi_o = math.atan2(-wi[1], -wi[0]) + sign * dphi  # from the mirror direction's azimuth
+        phi_o = math.atan2(-view[1], -view[0]) + sign * dphi  # from the view's mirror azimuth
         s = math.sqrt(max(0.0, 1.0 - mu * mu))
         return (s * math.cos(phi_o), s * math.sin(phi_o), mu)
+
+
+class SurfaceArrays(NamedTuple):
+    """A :class:`TableSurface`'s data as flat numpy float64 arrays (one-node grids padded to two),
+    for the vectorized plugin: grids ``wl`` (L,), ``cos_t`` (A,), ``cos_o`` (B,), ``phi`` (P,);
+    ``k_r`` (A·L,), ``k_d`` (A·B·P·L,) row-major; ``p_spec`` (B,) delta-lobe probability at the
+    view nodes; lobe sampling cells ``mu_edges`` (Cb + 1,) in cos θ_l and ``phi_edges`` (Cp + 1,);
+    per view node ``cdf`` and ``density`` (B·Cb·Cp,), ``has_cdf`` (B,) 1.0 where the node has
+    a table density (else cosine-weighted)."""
+
+    wl: np.ndarray
+    cos_t: np.ndarray
+    cos_o: np.ndarray
+    phi: np.ndarray
+    k_r: np.ndarray
+    k_d: np.ndarray
+    p_spec: np.ndarray
+    mu_edges: np.ndarray
+    phi_edges: np.ndarray
+    cdf: np.ndarray
+    density: np.ndarray
+    has_cdf: np.ndarray
+
+
+def _surface_arrays(wl, cos_t, cos_o, phi, k_r, k_d, p_spec, lobe: _LobeDistribution) -> SurfaceArrays:
+    cells = (len(lobe.mu_edges) - 1) * (len(lobe.phi_edges) - 1)
+    cdf = np.stack([np.asarray(c, float) if c is not None else np.linspace(1.0 / cells, 1.0, cells) for c in lobe.cdf])
+    density = np.stack([np.asarray(d, float) if d is not None else np.zeros(cells) for d in lobe.density])
+    has_cdf = np.array([c is not None for c in lobe.cdf], float)
+    return SurfaceArrays(*(np.ascontiguousarray(x, dtype=float).ravel() for x in (
+        wl, cos_t, cos_o, phi, k_r, k_d, p_spec, lobe.mu_edges, lobe.phi_edges, cdf, density, has_cdf)))

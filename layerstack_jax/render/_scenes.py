@@ -7,9 +7,13 @@ coated. The paper lights them with "a fluorescent lamp (N)" (Japanese neutral wh
 ≈ 5000 K); we take the CIE F-series illuminant of that colour temperature, FL8 (5000 K),
 from colour-science (:func:`fluorescent_spectrum`).
 
-The lamp is a rectangular area emitter above and in front of the objects, plus a dim uniform
-surround of the same spectrum (what the smooth, mirror-like objects reflect away from the lamp),
-over a grey diffuse floor. Scenes are plain Mitsuba dictionaries (``mi.load_dict``); the BSDFs
+The lamp is a large rectangular area emitter (5 m × 2 m) above and in front of the objects, plus
+a dim uniform surround of the same spectrum (what the smooth, mirror-like objects reflect away
+from the lamp), over a grey diffuse floor. A large, moderately bright lamp rather than a small
+intense one: the floor's caustics (lamp → sphere → floor) and the lamp's mirror images are then
+sampled without fireflies. By default the lamp's spectrum is carried by the camera's spectral
+response and the emitters are flat — the same image in expectation, less colour noise
+(:func:`camera`) — and the samples are stratified (``multijitter``). Scenes are plain Mitsuba dictionaries (``mi.load_dict``); the BSDFs
 are passed in (:func:`layerstack_jax.render.coated_bsdf`, or any Mitsuba BSDF).
 
 The teapot is no scanned mesh: it is generated here (no mesh file to license) as a surface of
@@ -159,32 +163,57 @@ def _teapot_file(resolution: int) -> str:
 
 
 # -- lights, camera, scenes -------------------------------------------------------------------
-def lamp_emitters(lamp: str = LAMP, lamp_radiance: float = 12.0, surround: float = 0.06) -> dict:
-    """The fluorescent lamp: a 2 × 0.6 rectangle above and in front of the objects (radiance
+def _uniform(value: float) -> dict:
+    return {"type": "uniform", "value": float(value)}
+
+
+def lamp_emitters(lamp: str = LAMP, lamp_radiance: float = 1.5, surround: float = 0.2, size=(5.0, 2.0),
+                  spectrum_in_sensor: bool = False) -> dict:
+    """The fluorescent lamp: a ``size`` (m) rectangle above and in front of the objects (radiance
     ``lamp_radiance`` × the normalized spectrum) and a uniform surround of ``surround`` × the
-    same spectrum."""
+    same spectrum.
+
+    ``spectrum_in_sensor``: the emitters are spectrally flat and the lamp's spectrum is left for
+    the sensor's spectral response (:func:`camera`'s ``srf``): the same image in expectation,
+    because every light source has that spectrum (see :func:`camera`)."""
     mi, _ = import_mitsuba()
     T = mi.ScalarTransform4f
+    spectrum = (lambda x: _uniform(x)) if spectrum_in_sensor else (lambda x: fluorescent_spectrum(lamp, x))
     return {
         "lamp": {
             "type": "rectangle",
-            "to_world": T().look_at(origin=[0.0, -2.5, 3.2], target=[0.0, 0.0, 0.3], up=[0, 0, 1]) @ T().scale([1.0, 0.3, 1.0]),
-            "emitter": {"type": "area", "radiance": fluorescent_spectrum(lamp, lamp_radiance)},
+            "to_world": T().look_at(origin=[0.0, -2.5, 3.2], target=[0.0, 0.0, 0.3], up=[0, 0, 1])
+            @ T().scale([0.5 * size[0], 0.5 * size[1], 1.0]),
+            "emitter": {"type": "area", "radiance": spectrum(lamp_radiance)},
         },
-        "surround": {"type": "constant", "radiance": fluorescent_spectrum(lamp, surround)},
+        "surround": {"type": "constant", "radiance": spectrum(surround)},
     }
 
 
-def camera(width: int, height: int, spp: int, origin=(0.0, -6.0, 2.0), target=(0.0, 0.0, 0.6), fov: float = 28.0) -> dict:
-    """A perspective camera with an ``hdrfilm`` (linear sRGB output) and an independent sampler."""
+def camera(width: int, height: int, spp: int, origin=(0.0, -6.0, 2.0), target=(0.0, 0.0, 0.6), fov: float = 28.0,
+           sampler: str = "multijitter", lamp: str | None = None) -> dict:
+    """A perspective camera with an ``hdrfilm`` (linear sRGB output) and a ``sampler``
+    (``"multijitter"``: stratified, jittered samples in every dimension — which lobe the coated
+    BSDF picks, the wavelengths, the pixel position — far less noise than ``"independent"`` at
+    the same samples per pixel).
+
+    ``lamp``: a CIE F-series name puts that spectrum in the sensor's spectral response (``srf``):
+    the camera weighs what it receives by the lamp's spectrum and draws its wavelengths from
+    it. In a scene whose every emitter is spectrally flat (``lamp_emitters(...,
+    spectrum_in_sensor=True)``) and lit by nothing else, the image equals, in expectation, that of
+    emitters with the lamp's spectrum (the transport is linear in the emitted spectrum), with
+    less colour noise: the wavelengths follow the lamp's mercury lines instead of missing them."""
     mi, _ = import_mitsuba()
-    return {
+    sensor = {
         "type": "perspective",
         "fov": fov,
         "to_world": mi.ScalarTransform4f().look_at(origin=list(origin), target=list(target), up=[0, 0, 1]),
         "film": {"type": "hdrfilm", "width": int(width), "height": int(height), "rfilter": {"type": "gaussian"}},
-        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "sampler": {"type": sampler, "sample_count": int(spp)},
     }
+    if lamp is not None:
+        sensor["srf"] = fluorescent_spectrum(lamp, 1.0)
+    return sensor
 
 
 def _floor() -> dict:
@@ -192,24 +221,28 @@ def _floor() -> dict:
     return {
         "type": "rectangle",
         "to_world": mi.ScalarTransform4f().scale([20.0, 20.0, 1.0]),
-        "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.25}},
+        "bsdf": {"type": "diffuse", "reflectance": _uniform(0.25)},
     }
 
 
-def fig8_scene(coated, bare, *, width: int = 160, height: int = 96, spp: int = 16, max_depth: int = 4, floor: bool = True) -> dict:
+def fig8_scene(coated, bare, *, width: int = 160, height: int = 96, spp: int = 16, max_depth: int = 4, floor: bool = True,
+               lamp: str = LAMP, sampler: str = "multijitter", spectrum_in_sensor: bool = True) -> dict:
     """Fig. 8: a coated sphere (left) beside a bare one (right), radius 0.6, under the lamp.
 
     ``coated``, ``bare``: Mitsuba BSDFs (e.g. :func:`coated_bsdf` of the coated and of the bare
-    tables). Returns the scene dictionary for ``mi.load_dict``."""
+    tables). ``lamp``: the CIE F-series illuminant; ``spectrum_in_sensor``: its spectrum carried
+    by the sensor rather than by the emitters (the same image, less colour noise: :func:`camera`).
+    Returns the scene dictionary for ``mi.load_dict``."""
     mi, _ = import_mitsuba()
     T = mi.ScalarTransform4f
     scene = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": int(max_depth)},
-        "sensor": camera(width, height, spp, origin=(0.0, -6.0, 1.6), target=(0.0, 0.0, 0.6), fov=24.0),
+        "sensor": camera(width, height, spp, origin=(0.0, -6.0, 1.6), target=(0.0, 0.0, 0.6), fov=24.0, sampler=sampler,
+                         lamp=lamp if spectrum_in_sensor else None),
         "coated": {"type": "sphere", "to_world": T().translate([-0.7, 0.0, 0.6]) @ T().scale(0.6), "bsdf": coated},
         "bare": {"type": "sphere", "to_world": T().translate([0.7, 0.0, 0.6]) @ T().scale(0.6), "bsdf": bare},
-        **lamp_emitters(),
+        **lamp_emitters(lamp, spectrum_in_sensor=spectrum_in_sensor),
     }
     if floor:
         scene["floor"] = _floor()
@@ -217,16 +250,18 @@ def fig8_scene(coated, bare, *, width: int = 160, height: int = 96, spp: int = 1
 
 
 def fig9_scene(teapot, cylinder, sphere, *, width: int = 192, height: int = 128, spp: int = 16, max_depth: int = 4,
-               teapot_resolution: int = 32) -> dict:
+               teapot_resolution: int = 32, lamp: str = LAMP, sampler: str = "multijitter",
+               spectrum_in_sensor: bool = True) -> dict:
     """Fig. 9 (Table 1): a teapot (left), a cylinder (middle, capped) and a sphere (right), each
-    with its BSDF, under the lamp, on the floor."""
+    with its BSDF, under the lamp, on the floor (options as in :func:`fig8_scene`)."""
     mi, _ = import_mitsuba()
     T = mi.ScalarTransform4f
     cyl = T().translate([0.25, 0.9, 0.0]) @ T().scale([0.42, 0.42, 1.1])
     return {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": int(max_depth)},
-        "sensor": camera(width, height, spp, origin=(0.0, -6.5, 2.2), target=(0.1, 0.3, 0.55), fov=30.0),
+        "sensor": camera(width, height, spp, origin=(0.0, -6.5, 2.2), target=(-0.05, 0.3, 0.55), fov=34.0, sampler=sampler,
+                         lamp=lamp if spectrum_in_sensor else None),
         "teapot": {"type": "ply", "filename": _teapot_file(teapot_resolution),
                    "to_world": T().translate([-1.35, 0.0, 0.0]) @ T().rotate([0, 0, 1], -30.0) @ T().scale(0.8),
                    "face_normals": False, "bsdf": teapot},
@@ -234,5 +269,5 @@ def fig9_scene(teapot, cylinder, sphere, *, width: int = 192, height: int = 128,
         "cylinder_cap": {"type": "disk", "to_world": T().translate([0.25, 0.9, 1.1]) @ T().scale(0.42), "bsdf": cylinder},
         "sphere": {"type": "sphere", "to_world": T().translate([1.35, -0.2, 0.5]) @ T().scale(0.5), "bsdf": sphere},
         "floor": _floor(),
-        **lamp_emitters(),
+        **lamp_emitters(lamp, spectrum_in_sensor=spectrum_in_sensor),
     }

@@ -522,7 +522,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     code = int(out.status)
     res = [np.asarray(r) for r in out.residuals]
     model = [np.asarray(m) for m in out.model]
-    J = np.asarray(out.jacobian)
+    J = out.jacobian  # dense (M, P), or in compressed form (fit_statistics knows both)
     if stats is None:
         stats = fit_statistics(J, x, res, layout, objective.n_points, sigma_given=objective.sigma_given,
                                scale_covariance=scale_covariance, rank_rtol=rank_rtol)

@@ -26,6 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._structured import CompressedJacobian, structured_covariance
+from ._structured import zero_columns as compressed_zero_columns
+
 __all__ = [
     "FitStatistics",
     "fit_statistics",
@@ -144,14 +147,15 @@ def unresolved_components(null_vectors, log_directions, rank, zero_columns, owne
 
 def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: bool, scale_covariance=None,
                    rank_rtol: float = 1e-8) -> FitStatistics:
-    """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``)
+    """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``;
+    or a :class:`~fitting._structured.CompressedJacobian`, whose covariance is the structured
+    inverse, :func:`~fitting._structured.structured_covariance`)
     at solutions ``x`` ``(..., P)``; ``data_residuals``: the weighted data residuals, one array
     ``(..., samples, wl)`` per dataset (0 at masked points); ``n_points`` the used data points.
 
     ``scale_covariance``: scale by χ²/dof (σ estimated from residuals); default: unless every
     dataset gives σ. Components with a zero Jacobian column or on a null direction (singular
     value < ``rank_rtol`` × the largest) get NaN standard errors."""
-    J = np.asarray(J, float)
     x = np.asarray(x, float)
     lead = x.shape[:-1]
     P = x.shape[-1]
@@ -160,8 +164,13 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
     dof = int(n_points) - P
     red = chi2 / dof if dof > 0 else np.full(lead, np.nan)
     scaled = (not sigma_given) if scale_covariance is None else bool(scale_covariance)
-    cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
-    zero = np.linalg.norm(J, axis=-2) == 0
+    if isinstance(J, CompressedJacobian):  # block structure: the structured inverse (fitting._structured)
+        cov, sv, rank, Vt, dirs = structured_covariance(J, x, layout.scale, rank_rtol)
+        zero = compressed_zero_columns(J)
+    else:
+        J = np.asarray(J, float)
+        cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
+        zero = np.linalg.norm(J, axis=-2) == 0
     unresolved = unresolved_components(Vt, dirs, rank, zero, layout.owner)
     s2 = red if scaled else np.ones(lead)
     cov = cov * np.asarray(s2)[..., None, None]

@@ -181,13 +181,17 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
         corr = cov / (d[..., :, None] * d[..., None, :])
     corr = np.where(unresolved[..., :, None] | unresolved[..., None, :], np.nan, corr)
     # unresolved pairs on one null direction: the limit sign(v_i v_j) of their correlation
-    null = np.arange(P) >= np.asarray(rank)[..., None]
-    strong = (np.abs(Vt) > _NULL_COMPONENT) & null[..., :, None] & ~zero[..., None, :]
-    both = strong[..., :, :, None] & strong[..., :, None, :]  # (..., row, P, P)
-    limit = np.sign(Vt[..., :, :, None] * Vt[..., :, None, :])
-    on_null = both.any(axis=-3)
-    lim = np.sum(np.where(both, limit, 0.0), axis=-3)
-    corr = np.where(on_null, np.clip(lim, -1, 1), corr)
+    # (only the rows that are null in some fit: (rows, P, P) per fit, none at full rank)
+    first = int(np.min(rank)) if np.size(rank) else P
+    if first < P:
+        V = np.asarray(Vt)[..., first:, :]
+        null = np.arange(first, P) >= np.asarray(rank)[..., None]
+        strong = (np.abs(V) > _NULL_COMPONENT) & null[..., :, None] & ~zero[..., None, :]
+        both = strong[..., :, :, None] & strong[..., :, None, :]  # (..., row, P, P)
+        limit = np.sign(V[..., :, :, None] * V[..., :, None, :])
+        on_null = both.any(axis=-3)
+        lim = np.sum(np.where(both, limit, 0.0), axis=-3)
+        corr = np.where(on_null, np.clip(lim, -1, 1), corr)
     eye = np.eye(P, dtype=bool)
     corr = np.where(eye & ~np.isnan(np.diagonal(cov, axis1=-2, axis2=-1))[..., None], 1.0, corr)
     origin = SIGMA_ESTIMATED if scaled else (SIGMA_GIVEN if sigma_given else SIGMA_DEFAULT)

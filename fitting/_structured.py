@@ -284,17 +284,21 @@ def structure_for(objective, mode: str, method: str) -> Optional[Structure]:
 
     cache = compiled_cache(objective)
     if "structure" not in cache:
-        st, why = find_structure(objective)
-        if st is not None:
-            ok, why = verify_structure(objective, st, _residuals_and_parts(objective))
-            st = st if ok else None
-        cache["structure"] = (st, why)
+        cache["structure"] = find_structure(objective)
     st, why = cache["structure"]
-    if mode == "structured":
-        if st is None:
+    if st is None or (mode == "auto" and 2 * st.tangents > st.P):
+        if mode == "structured":
             raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
-        return st
-    return st if 2 * st.tangents <= st.P else None
+        return None
+    if "structure_checked" not in cache:  # once, and only where it would be used
+        ok, why = verify_structure(objective, st, _residuals_and_parts(objective))
+        cache["structure_checked"] = (ok, why)
+    ok, why = cache["structure_checked"]
+    if not ok:
+        if mode == "structured":
+            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
+        return None
+    return st
 
 
 # --------------------------------------------------------------------------- the solve

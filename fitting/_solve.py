@@ -605,7 +605,8 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
         cache[key] = _host_fit(objective, o, batched)
     if key not in cache:
         solve = _solve_function(objective, o)
-        stats = _statistics_function(objective, structure_for(objective, o.structure, o.method))
+        structure = structure_for(objective, o.structure, o.method)
+        stats = _statistics_function(objective) if structure is None else _statistics_function(objective, structure)
 
         def run(start, args, optics, give_up):
             with traced_checks_off():  # trial points are the solver's business (traced_checks_off)
@@ -918,7 +919,7 @@ def bound_note(method: str, names: list, settled: bool, finished: int = 0) -> st
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
         max_steps: int = 256, rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9,
         sigma_tol: float = 1e-3, scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None,
-        structure: str = "auto"):
+        structure: str = "auto", correlation_limit: float = 0.99):
     """Fit ``objective`` and return a :class:`~fitting.FitResult`.
 
     Args:
@@ -953,6 +954,9 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             steps and the covariance are solved by block QR (:mod:`fitting._structured`) where
             that is cheaper than dense; ``"dense"``: never; ``"structured"``: always (an error
             where the fit has no such structure). The same values and statistics either way.
+        correlation_limit: parameters correlated beyond this magnitude are reported as poorly
+            separable, grouped, with the combination the data determine
+            (``result.separability``; :func:`fitting._statistics.separability_findings`).
 
     Never raises on non-convergence: see ``result.converged`` and ``result.reason``.
     ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
@@ -994,4 +998,5 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                         starts=starts, starts_converged=n_starts_converged, starts_abandoned=n_abandoned,
-                        note=bound_note(method, names, bool(settled[best]), int(finished[best])))
+                        note=bound_note(method, names, bool(settled[best]), int(finished[best])),
+                        correlation_limit=correlation_limit)

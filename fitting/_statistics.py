@@ -44,6 +44,8 @@ __all__ = [
     "trade_off_direction",
     "describe_trade_off",
     "separability_findings",
+    "batch_separability",
+    "separability_summary",
 ]
 
 #: σ origins, as reports write them.
@@ -358,3 +360,34 @@ def separability_findings(layout, x, covariance, correlation, unresolved=None, n
                     "pairs": int(np.sum(off > limit) // 2), "combination": words["combination"],
                     "direction": words["direction"], "groups": words["groups"], "spread": spread})
     return out
+
+
+def batch_separability(stats: FitStatistics, x, layout, limit: float = CORRELATION_LIMIT) -> list:
+    """:func:`separability_findings` of every fit of a batch (``stats`` with a leading axis of
+    fits, ``x`` ``(N, P)``): one list of findings per fit."""
+    x = np.asarray(x, float)
+    rank = np.asarray(stats.rank)
+    out = []
+    for k in range(x.shape[0]):
+        dirs = np.asarray(stats.log_directions[k])[int(rank[k]):]
+        out.append(separability_findings(layout, x[k], stats.covariance[k], stats.correlation[k],
+                                         stats.unresolved[k], dirs, limit))
+    return out
+
+
+def separability_summary(per_fit: list, limit: float = CORRELATION_LIMIT, at_most: int = 6) -> list:
+    """Summary lines of many fits' findings (:func:`batch_separability`): per kind of finding
+    (the parameters involved), in how many fits, with one fit's combination as example."""
+    counts: dict = {}
+    for findings in per_fit:
+        for f in findings or []:
+            key = (f["kind"], tuple(f["parameters"]))
+            n, example = counts.get(key, (0, f["combination"]))
+            counts[key] = (n + 1, example)
+    lines = []
+    for i, ((kind, params), (n, example)) in enumerate(sorted(counts.items(), key=lambda kv: -kv[1][0])):
+        if i == at_most:
+            lines.append(f"  … {len(counts) - i} more kinds of inseparable parameters (see each fit's findings)")
+            break
+        lines.append(f"  {n} fit(s): {kind} (|ρ| > {limit:g}): {', '.join(params)} — e.g. {example}")
+    return lines

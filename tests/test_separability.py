@@ -22,9 +22,9 @@ from fitting._statistics import correlated_groups, separability_findings
 
 
 # ----------------------------------------------------------------------------- a 2 nm oxide
-def test_thin_oxide_n_and_d_flagged_with_the_combination_they_determine():
-    """ψ/Δ at 70° of 2 nm of oxide on Si, n and d both fitted: correlation ≈ −1 (full rank):
-    flagged as poorly separable, with the product the data determine."""
+@pytest.fixture(scope="module")
+def oxide():
+    """ψ/Δ at 70° of 2 nm of oxide (n = 1.46) on Si, σ = 0.02°; n and d free."""
     wl = np.linspace(300.0, 800.0, 101)
     si = ls.material("Si", "Aspnes")
 
@@ -32,12 +32,19 @@ def test_thin_oxide_n_and_d_flagged_with_the_combination_they_determine():
         return ls.Stack(1.0, [ls.Layer(n, d, name="oxide")], ls.Substrate(si))
 
     rng = np.random.default_rng(0)
-    ds = []
+    ds, clean = [], []
     for q in ("psi", "delta"):
         g = ls.Ellipsometric(70.0, quantity=q)
         y = np.asarray(ls.reflectance(st(1.46, 2.0), wl, g))
+        clean.append(y)
         ds.append(ft.Dataset(g, y + 0.02 * rng.standard_normal(y.shape), sigma=0.02))
-    r = ft.fit(ft.Objective(st(1.5, 3.0), wl, ds, [ft.index_n("oxide"), ft.thickness("oxide")]))
+    return ft.Objective(st(1.5, 3.0), wl, ds, [ft.index_n("oxide"), ft.thickness("oxide")]), clean
+
+
+def test_thin_oxide_n_and_d_flagged_with_the_combination_they_determine(oxide):
+    """Correlation ≈ −1 at full rank: flagged as poorly separable, with the product the data
+    determine."""
+    r = ft.fit(oxide[0])
     assert r.converged and r.rank == 2
     rho = r.correlation[0, 1]
     assert rho < -0.99
@@ -61,6 +68,18 @@ def test_thin_oxide_n_and_d_flagged_with_the_combination_they_determine():
     d = json.loads(r.to_json())
     assert d["identifiability"]["findings"][0]["combination"] == text
     assert d["identifiability"]["correlation_limit"] == 0.99
+
+
+def test_fit_batch_reports_the_same_finding_for_every_fit(oxide):
+    obj, clean = oxide
+    rng = np.random.default_rng(1)
+    data = [y + 0.02 * rng.standard_normal((3,) + y.shape) for y in clean]
+    b = ft.fit_batch(obj, data, chunk_size=3, progress=False)
+    assert b.converged.all()
+    for k in range(3):
+        (f,) = b.separability[k]
+        assert f["kind"] == "poorly separable" and f["combination"].startswith("thickness[oxide]·n[oxide]^")
+    assert "3 fit(s): poorly separable (|ρ| > 0.99): n[oxide], thickness[oxide]" in b.summary()
 
 
 def test_a_looser_limit_is_stated_and_used():

@@ -164,3 +164,36 @@ def test_54_parameters_report_fits_a_screen_and_the_json_has_every_pair(tmp_path
     d = json.loads(r.to_json(tmp_path / "fit.json"))
     assert len(d["identifiability"]["not_separated"]) == len(r.not_separated)
     assert d["identifiability"]["findings"][0]["components"] == f["components"]
+
+
+def test_cli_fit_gives_the_alpha_h_advice_and_the_combination(tmp_path, capsys):
+    """`layerstack fit` of an absorbing slab with its thickness and α both free: the report names
+    α·h as what the data determine and gives fit-cube's advice (one helper)."""
+    from layerstack_cli import main
+    from layerstack_jax.io import save_spectra_csv
+
+    from fitting._cube import structural_degeneracy
+
+    wl = np.arange(400.0, 701.0, 10.0)
+    stack = tmp_path / "s.toml"
+    stack.write_text("""
+[[layers]]
+name = "slab"
+n = 1.5
+thickness_nm = { value = 8000, free = true, min = 0, max = 1e5 }
+coherent = false
+alpha_per_nm = { value = 3e-5, free = true }
+
+[substrate]
+n = 1.5
+""")
+    st = ls.Stack(1.0, [ls.Layer(1.5, 10_000.0, coherent=False, alpha=2e-5, name="slab")], ls.Substrate(1.5))
+    data = tmp_path / "d.csv"
+    save_spectra_csv(data, wl, {"a": np.asarray(ls.reflectance(st, wl, ls.Specular(0.0, "T")))})
+    code = main(["fit", str(stack), str(data), "-g", "specular:0:T", "-o", str(tmp_path / "r.json")])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "NOT IDENTIFIABLE" in text and "·" in text
+    advice = structural_degeneracy(ft.Objective(st, wl, ft.Dataset(ls.Specular(0.0, "T"), np.ones(wl.size) * 0.5),
+                                                [ft.thickness("slab"), ft.alpha("slab")]))
+    assert advice and advice[0] in text

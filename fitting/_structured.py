@@ -245,13 +245,13 @@ def verify_structure(objective, st: Structure, residuals_and_parts) -> tuple[boo
     z0 = jnp.asarray(objective.layout.x0 / objective.layout.scale)
     args = objective.args()
 
-    def both(z):
+    def both(z):  # one forward pass with both sets of tangents: one copy of the model to compile
         f = lambda v: residuals_and_parts(v, args, objective.optics)  # noqa: E731
         with traced_checks_off():
-            return (_compressed_jacobian(f, z, jnp.asarray(st.seeds))[0],
-                    _compressed_jacobian(f, z, jnp.asarray(weighted))[0])
+            return _compressed_jacobian(f, z, jnp.concatenate([jnp.asarray(st.seeds), jnp.asarray(weighted)]))[0]
 
-    K1, K2 = (np.asarray(a) for a in jax.jit(both)(z0))
+    K = np.asarray(jax.jit(both)(z0))
+    K1, K2 = K[:, :st.tangents], K[:, st.tangents:]
     Ks1, Ks2 = K1[:, st.g:], K2[:, st.g:]
     if not (np.all(np.isfinite(Ks1)) and np.all(np.isfinite(Ks2))):
         return False, "the Jacobian at the start is not finite"

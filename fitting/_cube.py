@@ -23,8 +23,9 @@ fitting — and writes maps into a zarr store, region by region:
 * maps: one per free parameter component (its name in :attr:`fitting.BatchResult.names`,
   made safe for zarr), its standard error (``<name>_stderr``), ``chi2``, ``reduced_chi2``,
   ``num_steps``, ``converged``, ``result_code``, ``rank`` of the normalised Jacobian and
-  ``identifiable`` (rank = number of free parameters: the pixel's *identifiability verdict*;
-  where it is 0, the stderr of the parameters involved are NaN) and ``status``.
+  ``identifiable`` (rank = number of free parameters and no group of parameters correlated
+  beyond 0.99, :attr:`fitting.BatchResult.separability`: the pixel's *identifiability verdict*;
+  where the rank is short, the stderr of the parameters involved are NaN) and ``status``.
 * before any pixel is fitted, the objective is checked for a degeneracy *by construction*: the
   thickness and α of the same incoherent layer both free (Beer: only α·h enters, Simonot
   eq. 20) — refused unless ``allow_degenerate=True`` (then warned once) — and the rank of the
@@ -341,7 +342,8 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
         put("result_code", r.result_code)
         put("rank", r.rank)
         put("converged", r.converged.astype(np.int8))
-        put("identifiable", (r.rank == n_free).astype(np.int8))
+        separable = np.array([not f for f in (r.separability or [None] * len(r.rank))])  # no |ρ| > 0.99 group
+        put("identifiable", ((r.rank == n_free) & separable).astype(np.int8))
     _write_region(s.out, maps, ys, xs)
     _mark_done(s.out, iy, ix)
     return {"region": (iy, ix), "pixels": int(status.size), "fitted": int(valid.size),

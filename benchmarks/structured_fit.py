@@ -243,8 +243,11 @@ def markdown(res: dict) -> str:
         "# S1–S3: structured least squares (spectral parameters free per wavelength)",
         "",
         f"Run {res['when']} (git {res['git']}), {res['machine']}, jax {jax.__version__} CPU, float64. "
-        f"`uptime` at the start: `{res['uptime']}`. Figures are wall times; the machine is shared (load averages "
-        "at each section's start and end are given): compare rows of one run.",
+        f"`uptime` at the start: `{res['uptime']}`. Process pinned to CPU(s) {res['cpus_used']} "
+        "(`taskset`): on this shared, overloaded machine XLA's CPU thread pool waits for its threads to be "
+        "scheduled, and mid-sized solves ran up to 40× slower with both CPUs (S2's solve at 201 wavelengths: "
+        "0.69 s on 2 CPUs at load 14, 16 ms pinned to one). Figures are wall times; load averages at each "
+        "section's start and end are given: compare rows of one run.",
         "",
         "## S1: two sheets in transmittance, one n + α(λ) free at 652 wavelengths (653 parameters)",
         "",
@@ -322,6 +325,7 @@ def main(argv=None) -> None:
     res = {"when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
            "git": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip(),
            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
+           "cpus_used": sorted(os.sched_getaffinity(0)),
            "uptime": subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()}
     if "S1" in only:
         res["S1"] = s1(a.repeats, a.dense)

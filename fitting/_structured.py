@@ -306,6 +306,27 @@ def _qr_r(a):
     return jnp.linalg.qr(a, mode="r")
 
 
+def _eliminate(A, b: int):
+    """Householder reflections of the first ``b`` columns of every matrix of the batch ``A``
+    ``(W, rows, cols)``, vectorised over the batch (``b`` is small and static: the reflections
+    are unrolled): rows ``:b`` of the result hold the ``b`` rows of ``R`` (upper triangular in
+    the first ``b`` columns), rows ``b:`` zeros in those columns and the rest reflected along —
+    what the remaining columns' least-squares problem needs. (XLA's batched QR of many tiny
+    matrices is a loop over the batch, far slower.)"""
+    for j in range(b):
+        x = A[:, j:, j]  # (W, rows - j)
+        norm = jnp.sqrt(jnp.sum(x * x, axis=-1))
+        sign = jnp.where(x[:, 0] < 0, -1.0, 1.0)
+        alpha = -sign * norm
+        v = x.at[:, 0].add(-alpha)
+        vn = jnp.sqrt(jnp.sum(v * v, axis=-1))
+        v = v / jnp.where(vn > 0, vn, 1.0)[:, None]  # a zero column: no reflection
+        tail = A[:, j:, :]
+        tail = tail - 2.0 * v[:, :, None] * jnp.einsum("wr,wrc->wc", v, tail)[:, None, :]
+        A = A.at[:, j:, :].set(tail)
+    return A
+
+
 def damped_block_solve(K, r, lam, st: Structure):
     r"""``(δ, ‖t‖²)``: the solution of :math:`\min_\delta \|J\delta - r\|^2 + \lambda\|\delta\|^2`
     (``δ`` ``(P,)``) for the Jacobian in compressed form ``K`` ``(M, g + b)`` by the block QR of
@@ -321,7 +342,7 @@ def damped_block_solve(K, r, lam, st: Structure):
     top = jnp.concatenate([Kb[..., g:], Kb[..., :g], rb[..., None]], axis=-1)
     eye = jnp.eye(b, dtype=dtype)
     bottom = jnp.concatenate([eye * damp[:, None, :], jnp.zeros((W, b, g + 1), dtype)], axis=-1)
-    R = _qr_r(jnp.concatenate([top, bottom], axis=-2))  # (W, min(k + b, b + g + 1), b + g + 1)
+    R = _eliminate(jnp.concatenate([bottom, top], axis=-2), b)  # (W, b + k, b + g + 1)
     Rs, G, t = R[:, :b, :b], R[:, :b, b:b + g], R[:, :b, -1]
     t = jnp.where(present, t, 0.0)
     norm2 = jnp.sum(t * t)
@@ -339,12 +360,25 @@ def damped_block_solve(K, r, lam, st: Structure):
     else:
         dg = jnp.zeros((0,), dtype)
         rhs = t
-    ds = jax.vmap(lambda a, v: jax.scipy.linalg.solve_triangular(a, v, lower=False))(Rs, rhs)
+    ds = _back_substitute(Rs, rhs)
     delta = jnp.zeros((st.P + 1,), dtype)
     delta = delta.at[jnp.asarray(st.spectral_index).ravel()].set(jnp.where(present, ds, 0.0).ravel())
     if g:
         delta = delta.at[jnp.asarray(st.global_index)].set(dg)
     return delta[:st.P], norm2
+
+
+def _back_substitute(R, v):
+    """Solve the upper-triangular ``(W, b, b)`` systems ``R x = v`` (``v`` ``(W, b)``),
+    vectorised over the batch, the ``b`` rows unrolled."""
+    b = R.shape[-1]
+    xs = [None] * b
+    for i in range(b - 1, -1, -1):
+        acc = v[:, i]
+        for j in range(i + 1, b):
+            acc = acc - R[:, i, j] * xs[j]
+        xs[i] = acc / R[:, i, i]
+    return jnp.stack(xs, axis=-1)
 
 
 class _BlockDescentState(eqx.Module):

@@ -216,4 +216,5 @@ def test_coverage_401_wavelengths_rho_g_and_alpha_free():
         total += z.size
     assert converged >= 95
     frac = inside / total
+    print(f"coverage: {frac:.4f} of {total} values within ±2σ; {converged}/100 converged")
     assert 0.90 <= frac <= 0.98, frac

@@ -134,8 +134,14 @@ def unresolved_components(null_vectors, log_directions, rank, zero_columns, owne
     Vt = np.asarray(null_vectors)
     P = Vt.shape[-1]
     owner = np.asarray(owner)
-    rows = np.arange(P)
-    null = rows >= np.asarray(rank)[..., None]  # (..., P) rows that are null
+    # only the rows that are null in some fit (none at full rank)
+    first_null = int(np.min(rank)) if np.size(rank) else P
+    if first_null >= P:
+        return np.asarray(zero_columns, bool).copy()
+    Vt = Vt[..., first_null:, :]
+    log_directions = np.asarray(log_directions)[..., first_null:, :]
+    rows = np.arange(first_null, P)
+    null = rows >= np.asarray(rank)[..., None]  # (..., rows) rows that are null
     comp = (np.abs(Vt) > _NULL_COMPONENT) & ~zero_columns[..., None, :] & null[..., :, None]  # (..., row, P)
     out = np.asarray(zero_columns, bool) | comp.any(axis=-2)
     for i in np.unique(owner):

@@ -554,29 +554,26 @@ def structured_covariance(J: CompressedJacobian, x, scale, rank_rtol: float):
     cov = np.full((N, P, P), np.nan)
     if full.any():
         f = np.nonzero(full)[0]
-        eye_b = np.eye(b)
-        Rs_inv = np.linalg.solve(Rs[f], np.broadcast_to(eye_b, Rs[f].shape))  # (n, W, b, b)
-        Css_blocks = Rs_inv @ np.swapaxes(Rs_inv, -1, -2)
         n = f.size
-        cn = np.zeros((n, P + 1, P + 1))
-        si = st.spectral_index  # (W, b)
-        rows_b = si[:, :, None]
-        cols_b = si[:, None, :]
-        cn[:, rows_b, cols_b] = Css_blocks
+        S = W * b  # block order: the spectral values wavelength by wavelength, then the globals
+        Rs_inv = np.linalg.solve(Rs[f], np.broadcast_to(np.eye(b), Rs[f].shape))  # (n, W, b, b)
+        Rs_inv = Rs_inv * present[None, :, :, None] * present[None, :, None, :]  # absent values: out
+        B = np.zeros((n, S + g, S + g))
         if g:
             Rg_inv = np.linalg.solve(Rg[f], np.broadcast_to(np.eye(g), Rg[f].shape))
-            Cgg = Rg_inv @ np.swapaxes(Rg_inv, -1, -2)
-            Wm = Rs_inv @ G[f] @ Rg_inv[:, None]  # (n, W, b, g)
-            Wm = Wm * present[None, :, :, None]
-            Wflat = Wm.reshape(n, W * b, g)
-            sflat = si.ravel()
-            cn[:, sflat[:, None], sflat[None, :]] += Wflat @ np.swapaxes(Wflat, -1, -2)
-            Csg = -(Wflat @ np.swapaxes(Rg_inv, -1, -2))  # (n, W b, g)
-            gi = st.global_index
-            cn[:, sflat[:, None], gi[None, :]] = Csg
-            cn[:, gi[:, None], sflat[None, :]] = np.swapaxes(Csg, -1, -2)
-            cn[:, gi[:, None], gi[None, :]] = Cgg
-        cn = cn[:, :P, :P]
+            Wm = (Rs_inv @ G[f] @ Rg_inv[:, None]).reshape(n, S, g)  # W_w = R_w^-1 G_w R_g^-1
+            B[:, :S, :S] = Wm @ np.swapaxes(Wm, -1, -2)
+            B[:, :S, S:] = -(Wm @ np.swapaxes(Rg_inv, -1, -2))
+            B[:, S:, :S] = np.swapaxes(B[:, :S, S:], -1, -2)
+            B[:, S:, S:] = Rg_inv @ np.swapaxes(Rg_inv, -1, -2)
+        diag = B[:, :S, :S].reshape(n, W, b, W, b)  # a view: add blockdiag(R_w^-1 R_w^-T)
+        w = np.arange(W)
+        diag[:, w, :, w, :] += np.moveaxis(Rs_inv @ np.swapaxes(Rs_inv, -1, -2), 1, 0)
+        pos = np.empty(P, int)  # free component -> its place in block order
+        sflat = st.spectral_index.ravel()
+        pos[sflat[sflat < P]] = np.flatnonzero(sflat < P)
+        pos[st.global_index] = S + np.arange(g)
+        cn = np.take(np.take(B, pos, axis=1), pos, axis=2)
         s = a[f] * scale
         cov[f] = cn * s[:, :, None] * s[:, None, :]
     Vt = np.zeros((N, P, P))

@@ -218,3 +218,33 @@ def test_coverage_401_wavelengths_rho_g_and_alpha_free():
     frac = inside / total
     print(f"coverage: {frac:.4f} of {total} values within ±2σ; {converged}/100 converged")
     assert 0.90 <= frac <= 0.98, frac
+
+
+def test_a_fixed_value_inside_a_free_spectrum():
+    """α(λ) free except at two wavelengths held at their start (absent from the blocks there):
+    still the dense path's values, standard errors and covariance."""
+    wl = np.linspace(420.0, 680.0, 20)
+    a_true = 3e-6 * (1 + 0.5 * np.sin(np.linspace(0, 4, 20)))
+    g = ls.Specular(0.0, "T")
+
+    def stack(h, a):
+        return ls.Stack(1.0, [ls.Layer(1.5, h, coherent=False, alpha=a, name="slab")], ls.Substrate(1.0))
+
+    h = np.array([200_000.0, 350_000.0])
+    rng = np.random.default_rng(5)
+    y = np.stack([np.asarray(ls.reflectance(stack(x, jnp.asarray(a_true)), wl, g)) for x in h])
+    y = y + SIGMA * rng.standard_normal(y.shape)
+    fixed = np.zeros(20, bool)
+    fixed[[3, 11]] = True
+    start = np.where(fixed, a_true, 2e-6)
+    params = [ft.thickness("slab", value=[200_000.0, 330_000.0], per_sample=True, fixed=np.array([True, False])),
+              ft.Parameter(("layers", "slab", "alpha"), "alpha", "alpha", value=start, basis="free", fixed=fixed)]
+    obj = ft.Objective(stack(h[0], jnp.asarray(start)), wl, ft.Dataset(g, y, sigma=SIGMA), params, n_samples=2)
+    st = _structured.structure_for(obj, "structured", "lm")
+    assert not st.present[[3, 11], 0].any() and st.present.sum() == 18
+    s = ft.fit(obj, structure="structured")
+    d = ft.fit(obj, structure="dense")
+    assert s.converged and d.converged and obj.n_parameters == 19
+    assert _rel(s.x, d.x) <= 1e-10
+    assert _rel(s.x_stderr, d.x_stderr) <= 1e-10
+    assert _cov_rel(s.covariance, d.covariance) <= 1e-10

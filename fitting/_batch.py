@@ -229,14 +229,14 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
               rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, sigma_tol: float = 1e-3,
               scale_covariance: Optional[bool] = None,
               rank_rtol: float = 1e-8, full_results: bool = False, start: str = "objective",
-              lookup_size: int = 256) -> BatchResult:
+              lookup_size: int = 256, structure: str = "auto") -> BatchResult:
     """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
 
     Args:
         objective: the model; its own data are not used, its σ / weights and masks are.
         data: one array per dataset shaped ``(N, samples, wl)`` (``(N, wl)`` for one sample),
             or a single array when the objective has one dataset.
-        method, max_steps, rtol, atol, gtol, sigma_tol, scale_covariance, rank_rtol: as
+        method, max_steps, rtol, atol, gtol, sigma_tol, scale_covariance, rank_rtol, structure: as
             :func:`~fitting.fit`.
         chunk_size: fits per compiled call (memory bound); N is processed in ⌈N/chunk⌉ calls
             of the same compiled function.
@@ -263,7 +263,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     import time
 
     start_time = time.perf_counter()
-    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
+    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol, structure)
     require_compiled_method("fit_batch", method)
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")

@@ -184,6 +184,8 @@ def test_batched_structured_fits_equal_single_ones(calibration):
         one = ft.fit(obj, data=[ys[0][k], ys[1][k]])
         assert _rel(b.x[k], one.x) <= 1e-8
         assert _rel(b.stderr[k], one.x_stderr) <= 1e-8
+    dense = ft.fit_batch(obj, ys, chunk_size=3, progress=False, structure="dense")
+    assert _rel(dense.x, b.x) <= 1e-10 and _rel(dense.stderr, b.stderr) <= 1e-10
 
 
 def test_other_methods_use_the_compressed_jacobian_for_statistics(slab):

@@ -61,7 +61,8 @@ from ._objective import Objective
 from ._results import build_result
 from ._statistics import bound_contacts
 from ._structured import (STRUCTURE_MODES, CompressedJacobian, StructuredDampedNewtonDescent, block_distance,
-                          structure_for, structured_jacobian_with_statistics, structured_statistics_function)
+                          compressed_jacobian_function, sparse_jacobian_function, structure_for,
+                          structured_jacobian_with_statistics, structured_statistics_function)
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
 __all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
@@ -678,7 +679,11 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
             return _statistics_function(objective, structure_for(objective, o.structure, o.method))(x, args, optics)
 
     res_fn = fit_jit(residuals)  # one fit at a time on the host (multi-starts too): compile time dominates
-    jac_fn = fit_jit(jax.jacfwd(residuals))
+    structure = structure_for(objective, o.structure, o.method)
+    if structure is None:
+        jac_fn = fit_jit(jax.jacfwd(residuals))
+    else:  # compressed forward mode, handed to scipy as a sparse matrix (its TRF then takes LSMR steps)
+        jac_fn = sparse_jacobian_function(fit_jit(compressed_jacobian_function(residuals, structure)), structure)
     stats = fit_jit(statistics)
 
     def one(z0, args, optics, give_up=None):  # no give-up rule on the host
@@ -686,7 +691,8 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         sol = least_squares(
             lambda z: np.asarray(res_fn(z, args, optics), dtype=float),
             z0,
-            jac=lambda z: np.asarray(jac_fn(z, args, optics), dtype=float),
+            jac=lambda z: jac_fn(z, args, optics) if structure is not None else np.asarray(jac_fn(z, args, optics),
+                                                                                            dtype=float),
             bounds=(lower, upper), method="trf", x_scale=1.0,
             xtol=o.rtol, ftol=o.rtol, gtol=o.gtol, max_nfev=o.max_steps,
         )

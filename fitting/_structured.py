@@ -69,7 +69,8 @@ from layerstack_jax._validate import traced_checks_off
 
 __all__ = ["Structure", "CompressedJacobian", "find_structure", "verify_structure", "structure_for",
            "STRUCTURE_MODES", "StructuredDampedNewtonDescent", "structured_jacobian_with_statistics",
-           "structured_statistics_function", "structured_covariance", "damped_block_solve", "dense_of"]
+           "structured_statistics_function", "structured_covariance", "damped_block_solve", "dense_of",
+           "compressed_jacobian_function", "sparse_jacobian_function"]
 
 #: ``structure=`` of :func:`~fitting.fit`: choose, always the dense Jacobian, or insist on the structured one.
 STRUCTURE_MODES = ("auto", "dense", "structured")
@@ -482,6 +483,34 @@ def structured_statistics_function(objective, st: Structure, residuals_and_parts
         return model, res, pen, CompressedJacobian(K, st)
 
     return stats
+
+
+def compressed_jacobian_function(residuals, st: Structure):
+    """``(z, args, optics) -> K`` ``(M, g + b)``: the compressed Jacobian of the pure
+    ``residuals(z, args, optics)`` (``g + b`` forward-mode tangents)."""
+    seeds = jnp.asarray(st.seeds)
+
+    def K(z, args, optics):
+        return _compressed_jacobian(lambda v: (residuals(v, args, optics), None), z, seeds.astype(z.dtype))[0]
+
+    return K
+
+
+def sparse_jacobian_function(compressed, st: Structure):
+    """``(z, args, optics) -> scipy.sparse.csr_matrix`` ``(M, P)`` from a compressed-Jacobian
+    function (:func:`compressed_jacobian_function`): the host solver's (scipy TRF) Jacobian."""
+    from scipy.sparse import csr_matrix
+
+    rows = np.broadcast_to(np.arange(st.M)[:, None], (st.M, st.tangents))
+    cols = np.concatenate([np.broadcast_to(st.global_index, (st.M, st.g)), st.row_spectral], axis=1)
+    keep = cols < st.P
+    rows, cols = rows[keep], cols[keep]
+
+    def jac(z, args, optics):
+        K = np.asarray(compressed(z, args, optics), dtype=float)
+        return csr_matrix((K[keep], (rows, cols)), shape=(st.M, st.P))
+
+    return jac
 
 
 # --------------------------------------------------------------------------- covariance

@@ -261,3 +261,37 @@ def test_trf_with_the_sparse_compressed_jacobian(calibration):
     assert t.converged
     assert np.max(np.abs(t.x - s.x) / s.x_stderr) < 1e-2
     assert _rel(t.x_stderr, s.x_stderr) < 1e-3
+
+
+def test_per_sample_free_spectrum_and_a_bare_dataset():
+    """ρg(λ) free per sample (one spectral block per sample; the bare background reads sample
+    0's), each sample read at 45°/0° and in a sphere, α on a basis (known thicknesses): the
+    structured fit is the dense one."""
+    wl = np.linspace(400.0, 700.0, 18)
+    geometries = (ls.Directional(45.0, 0.0), ls.Sphere(8.0))
+    rho = np.stack([0.3 + 0.3 * np.linspace(0, 1, 18), 0.5 - 0.2 * np.linspace(0, 1, 18)])
+    a_true = 2e-5 * (1 + 0.3 * np.cos(np.linspace(0, 3, 18)))
+
+    def st(h, r, a=a_true):
+        return ls.Stack(1.0, [ls.Layer(1.52, h, coherent=False, alpha=a, name="v")], ls.LambertianBackground(1.5, r))
+
+    rng = np.random.default_rng(8)
+    datasets = []
+    for g in geometries:
+        y = np.stack([np.asarray(ls.reflectance(st(h, jnp.asarray(r)), wl, g)) for h, r in zip([10_000.0, 30_000.0], rho)])
+        datasets.append(ft.Dataset(g, y + SIGMA * rng.standard_normal(y.shape), sigma=SIGMA))
+    g = geometries[0]
+    bare = np.asarray(ls.reflectance(ls.Stack(1.0, [], ls.LambertianBackground(1.5, jnp.asarray(rho[0]))), wl, g))
+    datasets.append(ft.Dataset(g, bare + SIGMA * rng.standard_normal(18), sigma=SIGMA, bare=True))
+    params = [ft.thickness("v", value=[10_000.0, 30_000.0], per_sample=True, fixed=np.array([True, True])),
+              ft.alpha("v", basis=3, value=[1.5e-5, 1.5e-5, 1.5e-5]),
+              ft.rho_g(basis="free", per_sample=True, value=np.full((2, 18), 0.45))]
+    obj = ft.Objective(st(10_000.0, 0.45, 1.5e-5), wl, datasets, params, n_samples=2)
+    stc = _structured.structure_for(obj, "structured", "lm")
+    assert (stc.b, stc.g, stc.k) == (2, 3, 5)
+    s = ft.fit(obj, structure="structured")
+    d = ft.fit(obj, structure="dense")
+    assert s.converged and d.converged and s.rank == obj.n_parameters
+    assert _rel(s.x, d.x) <= 1e-10
+    assert _rel(s.x_stderr, d.x_stderr) <= 1e-10
+    assert _cov_rel(s.covariance, d.covariance) <= 1e-10

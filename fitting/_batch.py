@@ -34,7 +34,8 @@ from ._parameters import thickness as thickness_parameter
 from ._results import build_result
 from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
                      require_compiled_method, settle_on_bounds, starting_point)
-from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
+from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
+                          fit_statistics, separability_summary)
 from ._status import CONVERGED, INVALID_DATA, result_message
 
 __all__ = ["BatchResult", "fit_batch", "calibration_series", "background_rho_g"]
@@ -61,6 +62,9 @@ class BatchResult:
             fits that ended on such a bound again, finished by L-BFGS-B
             (:func:`fitting._solve.settle_on_bounds`);
         invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
+        separability: per fit, the groups of parameters correlated beyond 0.99 with the
+            combination the data determine (:func:`fitting._statistics.separability_findings`;
+            None for fits not made);
         wall_time_s: wall-clock time of the batch, seconds.
         results: with ``fit_batch(..., full_results=True)``, one :class:`~fitting.FitResult` per
             fit (report, residual spectra, covariance, plot, JSON), else None.
@@ -93,6 +97,7 @@ class BatchResult:
     restarted: Optional[np.ndarray] = None
     finished_with_lbfgsb: Optional[np.ndarray] = None
     invalid_data: dict = dataclasses.field(default_factory=dict)
+    separability: Optional[list] = None
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -133,6 +138,8 @@ class BatchResult:
                          f"(dof {self.dof}, σ given)")
         else:
             lines.append(f"  no σ given: χ² not meaningful; σ {self.sigma_origin}")
+        if self.separability is not None:
+            lines += separability_summary(self.separability)
         deficient = int((self.rank < self.x.shape[1]).sum())
         if deficient:
             lines.append(f"  {deficient} fit(s) with a non-identifiable parameter combination (rank deficient)")
@@ -222,14 +229,14 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
               rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, sigma_tol: float = 1e-3,
               scale_covariance: Optional[bool] = None,
               rank_rtol: float = 1e-8, full_results: bool = False, start: str = "objective",
-              lookup_size: int = 256) -> BatchResult:
+              lookup_size: int = 256, structure: str = "auto") -> BatchResult:
     """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
 
     Args:
         objective: the model; its own data are not used, its σ / weights and masks are.
         data: one array per dataset shaped ``(N, samples, wl)`` (``(N, wl)`` for one sample),
             or a single array when the objective has one dataset.
-        method, max_steps, rtol, atol, gtol, sigma_tol, scale_covariance, rank_rtol: as
+        method, max_steps, rtol, atol, gtol, sigma_tol, scale_covariance, rank_rtol, structure: as
             :func:`~fitting.fit`.
         chunk_size: fits per compiled call (memory bound); N is processed in ⌈N/chunk⌉ calls
             of the same compiled function.
@@ -256,7 +263,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     import time
 
     start_time = time.perf_counter()
-    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
+    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol, structure)
     require_compiled_method("fit_batch", method)
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise LayerstackError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
@@ -322,8 +329,16 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         dof=stats.dof, sigma_origin=stats.sigma_origin, unresolved=spread(stats.unresolved, False),
         at_bound=spread(lo | hi, False), finished_on_bound=spread(settled, False),
         restarted=spread(finished == RESTARTED, False), finished_with_lbfgsb=spread(finished == BY_LBFGSB, False),
-        invalid_data=invalid,
+        invalid_data=invalid, separability=spread_list(batch_separability(stats, out.x, layout), good, n_all),
     )
+
+
+def spread_list(items: list, good, n_all: int) -> list:
+    """Per-fit ``items`` of the fits made (rows ``good``) → all ``n_all`` rows (None for the others)."""
+    out = [None] * n_all
+    for k, i in enumerate(good):
+        out[int(i)] = items[k]
+    return out
 
 
 def _row(stats: FitStatistics, k: int) -> FitStatistics:

@@ -41,10 +41,11 @@ fitting — and writes maps into a zarr store, region by region:
 * maps: one per free parameter component (its name in :attr:`fitting.BatchResult.names`,
   made safe for zarr), its standard error (``<name>_stderr``), ``chi2``, ``reduced_chi2``,
   ``num_steps``, ``converged``, ``result_code``, ``rank`` of the normalised Jacobian and
-  ``identifiable`` (rank = number of free parameters: the pixel's *identifiability verdict*;
-  where it is 0, the stderr of the parameters involved are NaN), ``bands_used`` and ``status``.
-  ``reduced_chi2`` = χ²/ν with each pixel's own ν; without σ, the standard errors are scaled by
-  it (σ estimated from that pixel's residuals).
+  ``identifiable`` (rank = number of free parameters and no group of parameters correlated
+  beyond 0.99, :attr:`fitting.BatchResult.separability`: the pixel's *identifiability verdict*;
+  where the rank is short, the stderr of the parameters involved are NaN), ``bands_used`` and
+  ``status``. ``reduced_chi2`` = χ²/ν with each pixel's own ν; without σ, the standard errors are
+  scaled by it (σ estimated from that pixel's residuals).
 * before any pixel is fitted, the objective is checked for a degeneracy *by construction*: the
   thickness and α of the same incoherent layer both free (Beer: only α·h enters, Simonot
   eq. 20) — refused unless ``allow_degenerate=True`` (then warned once) — and the rank of the
@@ -418,7 +419,8 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
         put("result_code", r.result_code)
         put("rank", r.rank)
         put("converged", r.converged.astype(np.int8))
-        put("identifiable", (r.rank == n_free).astype(np.int8))
+        separable = np.array([not f for f in (r.separability or [None] * len(r.rank))])  # no |ρ| > 0.99 group
+        put("identifiable", ((r.rank == n_free) & separable).astype(np.int8))
         put("bands_used", bands.astype(np.int16))
         status.reshape(-1)[valid] = verdict[:valid.size]
     maps["status"] = status

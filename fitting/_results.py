@@ -15,7 +15,14 @@ computation shared with :func:`~fitting.fit_batch`. This module turns them into 
 * **parameters on a bound** — named with value and bound;
 * **parameters the data cannot separate** — null directions of the normalised Jacobian
   (singular value below ``rank_rtol`` × the largest; only a combination such as α·h is
-  determined) and pairs with |ρ| > 0.99, whatever the rank test says.
+  determined) and parameters with |ρ| > 0.99 (``correlation_limit``), whatever the rank test
+  says, grouped (:func:`fitting._statistics.separability_findings`): one finding per group of
+  linked parameters, naming the combination the data determine ("d·n^3.8 is determined, not n
+  and d separately"). The report stays short (a few findings, a few pairs); the JSON holds every
+  finding and every pair;
+* **structural degeneracies** — free parameters no data can separate by construction (an
+  incoherent layer's thickness and α: only α·h enters Beer's law), with the advice to fix one
+  (:func:`fitting._cube.structural_degeneracy`, shared with :func:`~fitting.fit_cube`).
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import numpy as np
 from ._objective import Objective
 from ._status import CONVERGED, result_message
 from ._statistics import (CORRELATION_LIMIT, SIGMA_DEFAULT, SIGMA_GIVEN, bound_contacts, fit_statistics,
-                          linearised_covariance, strong_correlations)
+                          linearised_covariance, separability_findings, strong_correlations)
 
 __all__ = ["FitResult", "linearised_covariance", "build_result", "quality_verdict", "percent_warnings",
            "delta_sign_warnings",
@@ -51,7 +58,7 @@ def _combination(groups: list[tuple[str, float]]) -> str:
         p = -w1 / w2
         exp = "" if abs(p - 1) < 0.02 else f"^{p:.3g}"
         return f"{n1}·{n2}{exp}"
-    return ", ".join(n for n, _ in groups)
+    return ", ".join(n for n, _ in groups[:6]) + (f" and {len(groups) - 6} more" if len(groups) > 6 else "")
 
 
 def _mask(objective: Objective) -> tuple:
@@ -199,8 +206,12 @@ class FitResult:
         quality: the verdict on the fit quality; ``warnings``: plain warnings (implausible χ²,
             percent data, bounds, inseparable parameters, non-convergence).
         at_bound: ``[{"parameter", "value", "bound", "side"}]``; ``not_separated``:
-            ``[{"parameters", "correlation"}]``; ``note``: what the solver layer did besides the
-            chosen method (e.g. finished on a bound by L-BFGS-B).
+            ``[{"parameters", "correlation"}]`` (every pair with |ρ| > ``correlation_limit``);
+            ``separability``: those pairs grouped, one finding per group of linked parameters
+            with the combination the data determine
+            (:func:`fitting._statistics.separability_findings`); ``note``: what the solver layer
+            did besides the chosen method (e.g. finished on a bound by L-BFGS-B).
+        identifiable: no null direction and no group of parameters with |ρ| above the limit.
 
     Values and errors are in each parameter's own unit (nm for thicknesses, 1/nm for α,
     dimensionless for n and ρg); ``model``, ``data`` and ``residuals`` in the unit the
@@ -245,10 +256,14 @@ class FitResult:
     not_separated: list = dataclasses.field(default_factory=list)
     note: str = ""
     rank_rtol: float = 1e-8
+    separability: list = dataclasses.field(default_factory=list)
+    correlation_limit: float = CORRELATION_LIMIT
 
     @property
     def identifiable(self) -> bool:
-        return not self.non_identifiable
+        """True when every parameter is determined on its own: no null direction and no group
+        of parameters correlated beyond ``correlation_limit``."""
+        return not self.non_identifiable and not self.separability
 
     def stack(self, sample: int = 0):
         """The fitted :class:`~layerstack_jax.Stack` of ``sample``."""
@@ -326,16 +341,8 @@ class FitResult:
         sv = self.singular_values
         lines.append(f"  rank {self.rank} of {len(self.x)} (singular values of the normalised Jacobian below "
                      f"{self.rank_rtol:g} × the largest count as zero); {np.nanmax(sv):.3g} … {np.nanmin(sv):.3g}")
-        if not self.non_identifiable and not self.not_separated:
-            lines.append("  all parameters are identifiable from these data")
-        for item in self.non_identifiable:
-            lines.append(f"  NOT IDENTIFIABLE: {item['combination']}")
-            lines.append(f"    moving along {item['direction']} leaves the spectra unchanged;")
-            lines.append("    the values of these parameters are arbitrary along it (standard errors not reported)")
-        for item in self.not_separated:
-            rho = item["correlation"]
-            lines.append(f"  NOT SEPARATED by the data: {' / '.join(item['parameters'])}"
-                         + (f" (correlation {rho:+.4f}, |ρ| > {CORRELATION_LIMIT:g})" if rho is not None else ""))
+        lines += identifiability_lines(self.non_identifiable, self.separability, self.not_separated,
+                                       self.correlation_limit)
         lines += ["", "residuals (model - data)", "------------------------"]
         for ds, r in zip(obj.datasets, self.residuals):
             rms = np.sqrt(np.nanmean(r ** 2, axis=-1))
@@ -391,6 +398,9 @@ class FitResult:
                 "rank_rtol": float(self.rank_rtol),
                 "singular_values": clean(self.singular_values),
                 "non_identifiable": self.non_identifiable,
+                "correlation_limit": float(self.correlation_limit),
+                "findings": [{k: (v if k != "spread" or np.isfinite(v) else None) for k, v in f.items()}
+                             for f in self.separability],
                 "not_separated": self.not_separated,
             },
             "wavelength_nm": clean(obj.wavelength),
@@ -491,11 +501,75 @@ def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.
             else:
                 groups += [(layout.names[c], float(w[c])) for c in idx]
             names.append(name)
-        direction = ", ".join(f"δln {n} = {g:+.2f}" for n, g in groups)
+        direction = ", ".join(f"δln {n} = {g:+.2f}" for n, g in groups[:6]) + (
+            f" and {len(groups) - 6} more" if len(groups) > 6 else "")
         combo = _combination(groups)
         text = (f"only {combo} is determined" if len(groups) == 2 else f"the combination of {combo} along one direction")
         out.append({"parameters": names, "direction": direction, "combination": text})
     return out, involved
+
+
+def structural_degeneracy(objective: Objective) -> list:
+    """The advice of :func:`fitting._cube.structural_degeneracy` (one helper for ``fit``, ``fit_cube``
+    and their commands): free parameters no data can separate by construction, and what to do."""
+    from ._cube import structural_degeneracy as advice  # here: _cube imports this module
+
+    return advice(objective)
+
+
+#: The report shows at most this many findings of each kind and this many pairs; the JSON has all.
+REPORT_FINDINGS, REPORT_PAIRS = 6, 5
+
+
+def separability_warning(findings: list, pairs: list, limit: float = CORRELATION_LIMIT) -> str:
+    """One line for the warnings: the groups the data cannot separate, by their combination."""
+    if not findings:
+        return ("the data cannot separate " + "; ".join(" / ".join(p["parameters"]) for p in pairs[:REPORT_PAIRS])
+                + (f" and {len(pairs) - REPORT_PAIRS} more pairs" if len(pairs) > REPORT_PAIRS else ""))
+    shown = [f["combination"] for f in findings[:3]]
+    more = f" (and {len(findings) - 3} more groups)" if len(findings) > 3 else ""
+    return (f"the data cannot separate {len(findings)} group(s) of parameters (|ρ| > {limit:g}, {len(pairs)} pair(s)): "
+            + "; ".join(shown) + more + " — see identifiability")
+
+
+def identifiability_lines(non_identifiable: list, findings: list, pairs: list,
+                          limit: float = CORRELATION_LIMIT) -> list:
+    """The identifiability lines of a report, at most a screenful: null directions grouped by the
+    parameters they involve, the poorly separable groups with the combination the data
+    determine, the first pairs beyond the correlation limit; what is left out is counted and
+    found in the JSON (``identifiability``)."""
+    lines = []
+    if not non_identifiable and not findings and not pairs:
+        return ["  all parameters are identifiable from these data"]
+    by_params: dict = {}
+    for item in non_identifiable:
+        by_params.setdefault(tuple(item["parameters"]), []).append(item)
+    for k, (params, items) in enumerate(by_params.items()):
+        if k == REPORT_FINDINGS:
+            lines.append(f"  … {len(by_params) - k} more kinds of non-identifiable direction (JSON: "
+                         "identifiability.non_identifiable)")
+            break
+        item = items[0]
+        count = f" ({len(items)} such directions, e.g.)" if len(items) > 1 else ""
+        lines.append(f"  NOT IDENTIFIABLE{count}: {item['combination']}")
+        lines.append(f"    moving along {item['direction']} leaves the spectra unchanged;")
+        lines.append("    the values of these parameters are arbitrary along it (standard errors not reported)")
+    poor = [f for f in findings if f["kind"] == "poorly separable"]
+    for k, f in enumerate(poor):
+        if k == REPORT_FINDINGS:
+            lines.append(f"  … {len(poor) - k} more poorly separable groups (JSON: identifiability.findings)")
+            break
+        lines.append(f"  POORLY SEPARABLE (|ρ| up to {f['max_abs_correlation']:.4f} > {limit:g}, "
+                     f"{f['pairs']} pair(s)): {f['combination']}")
+        lines.append(f"    the data barely change along {f['direction']}")
+    for item in pairs[:REPORT_PAIRS]:
+        rho = item["correlation"]
+        lines.append(f"  NOT SEPARATED by the data: {' / '.join(item['parameters'])}"
+                     + (f" (correlation {rho:+.4f}, |ρ| > {limit:g})" if rho is not None else ""))
+    if len(pairs) > REPORT_PAIRS:
+        lines.append(f"  … {len(pairs) - REPORT_PAIRS} more pairs with |ρ| > {limit:g} (every pair: JSON "
+                     "identifiability.not_separated)")
+    return lines
 
 
 def _plain_residuals(objective: Objective, model, data) -> list:
@@ -513,7 +587,8 @@ def _plain_residuals(objective: Objective, model, data) -> list:
 
 
 def build_result(objective: Objective, options, out, args, *, scale_covariance, rank_rtol, starts=1,
-                 starts_converged=None, note: str = "", stats=None, starts_abandoned=None) -> FitResult:
+                 starts_converged=None, note: str = "", stats=None, starts_abandoned=None,
+                 correlation_limit: float = CORRELATION_LIMIT) -> FitResult:
     """:class:`FitResult` of one fit from its :class:`~fitting._solve.FitOutput` ``out``
     (NumPy, no batch axis) and data ``args``; ``stats``: its :class:`~fitting._statistics.FitStatistics`
     when already computed (a row of a batch's), else computed here by the same function."""
@@ -522,7 +597,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     code = int(out.status)
     res = [np.asarray(r) for r in out.residuals]
     model = [np.asarray(m) for m in out.model]
-    J = np.asarray(out.jacobian)
+    J = out.jacobian  # dense (M, P), or in compressed form (fit_statistics knows both)
     if stats is None:
         stats = fit_statistics(J, x, res, layout, objective.n_points, sigma_given=objective.sigma_given,
                                scale_covariance=scale_covariance, rank_rtol=rank_rtol)
@@ -545,15 +620,19 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     warnings = warnings + percent_warnings(objective, data)
     warnings = warnings + delta_sign_warnings(objective, options, args, chi2, dof)
     at_bound = bounds_hit(layout, x)
-    separated = not_separated(list(layout.names), stats.correlation, non_ident)
+    separated = not_separated(list(layout.names), stats.correlation, non_ident, correlation_limit)
+    findings = separability_findings(layout, x, stats.covariance, stats.correlation, stats.unresolved,
+                                     np.asarray(stats.log_directions)[int(stats.rank):], correlation_limit)
     converged = code == CONVERGED
     if not converged:
         warnings.insert(0, f"the fit did not converge ({result_message(code)}): the values are where the solver stopped")
     if at_bound:
         warnings.append("on a bound: " + ", ".join(b["parameter"] for b in at_bound)
                         + " (the minimum within the bounds; its standard errors assume a free parameter)")
-    if separated:
-        warnings.append("the data cannot separate " + "; ".join(" / ".join(p["parameters"]) for p in separated))
+    structural = structural_degeneracy(objective)
+    warnings += structural
+    if findings or separated:
+        warnings.append(separability_warning(findings, separated, correlation_limit))
     return FitResult(
         objective=objective, method=options.method, x=x, x_stderr=err, names=list(layout.names), values=values,
         stderr=stderr, spectra=spectra, covariance=np.asarray(stats.covariance), correlation=np.asarray(stats.correlation),
@@ -564,4 +643,5 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
         non_identifiable=non_ident, starts=starts, starts_converged=starts_converged, starts_abandoned=starts_abandoned,
         sigma_origin=stats.sigma_origin, sigma_given=bool(objective.sigma_given), sigma_estimate=s, quality=verdict,
         warnings=warnings, at_bound=at_bound, not_separated=separated, note=note, rank_rtol=float(rank_rtol),
+        separability=findings, correlation_limit=float(correlation_limit),
     )

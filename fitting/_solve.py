@@ -60,6 +60,9 @@ from ._bounded import compiled_lbfgsb
 from ._objective import Objective
 from ._results import build_result
 from ._statistics import bound_contacts
+from ._structured import (STRUCTURE_MODES, CompressedJacobian, StructuredDampedNewtonDescent, block_distance,
+                          compressed_jacobian_function, sparse_jacobian_function, structure_for,
+                          structured_jacobian_with_statistics, structured_statistics_function)
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
 __all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
@@ -81,7 +84,11 @@ class SolverOptions:
     ``max_steps``: iteration limit; ``sigma_tol``: the least-squares methods (``lm``,
     ``gauss-newton``, ``dogleg``) also stop as soon as the Gauss–Newton step still to go is
     shorter than ``sigma_tol`` standard errors (:func:`gauss_newton_distance`; 0 turns that
-    rule off, leaving optimistix's step and cost test alone).
+    rule off, leaving optimistix's step and cost test alone); ``structure``: the Jacobian's
+    form (:data:`fitting._structured.STRUCTURE_MODES`) — ``"auto"`` uses the compressed,
+    block-structured Jacobian of spectral parameters free per wavelength where it pays
+    (:func:`fitting._structured.structure_for`), ``"dense"`` never, ``"structured"`` always
+    (an error where the fit has no such structure).
     """
 
     method: str = "lm"
@@ -90,10 +97,13 @@ class SolverOptions:
     gtol: float = 1e-9
     max_steps: int = 256
     sigma_tol: float = 1e-3
+    structure: str = "auto"
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise LayerstackError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.structure not in STRUCTURE_MODES:
+            raise LayerstackError(f"structure must be one of {STRUCTURE_MODES}, got {self.structure!r}")
         if not (isinstance(self.max_steps, (int, np.integer)) and self.max_steps >= 1):
             raise LayerstackError(f"max_steps must be an integer >= 1, got {self.max_steps!r}")
         for name in ("rtol", "atol", "gtol"):
@@ -109,7 +119,8 @@ class FitOutput(NamedTuple):
     ``x``: physical solution ``(P,)``; ``num_steps``; ``status`` (:data:`STATUS`); ``model``:
     model values per dataset ``(samples, wl)``; ``residuals``: weighted data residuals per
     dataset; ``penalty``: penalty residuals; ``jacobian``: ``(M, P)`` of the full residual vector
-    w.r.t. ``x / scale``."""
+    w.r.t. ``x / scale`` (a :class:`~fitting._structured.CompressedJacobian` standing for it
+    when the fit uses the block structure of spectral parameters free per wavelength)."""
 
     x: Float[Array, "*fit P"]
     num_steps: Int[Array, "*fit"]
@@ -117,7 +128,7 @@ class FitOutput(NamedTuple):
     model: tuple[Float[Array, "..."], ...]
     residuals: tuple[Float[Array, "..."], ...]
     penalty: Float[Array, "*fit K"]
-    jacobian: Float[Array, "*fit M P"]
+    jacobian: Float[Array, "*fit M P"] | CompressedJacobian
 
 
 # --------------------------------------------------------------------------- Levenberg–Marquardt
@@ -170,7 +181,7 @@ def gauss_newton_distance(residual: Float[Array, " M"], jacobian: Float[Array, "
     return d2, jnp.sum(residual * residual) / max(dof, 1)
 
 
-def near_minimum(state, sigma_tol: float, dof: int):
+def near_minimum(state, sigma_tol: float, dof: int, structure=None):
     r"""True once the last accepted point of a Gauss–Newton-family solve (optimistix state) is
     within ``sigma_tol`` standard errors of the minimum: :math:`d^2 \le`
     ``sigma_tol``\ :sup:`2` :math:`\min(1, s^2)` (:func:`gauss_newton_distance`).
@@ -182,7 +193,10 @@ def near_minimum(state, sigma_tol: float, dof: int):
     optimistix's step and cost test ends the solve, as before. Later steps of a statistically
     converged fit move it by less than ``sigma_tol`` σ — each one a full Jacobian of the model."""
     r = jnp.concatenate([jnp.ravel(a) for a in jax.tree.leaves(state.f_info.residual)])
-    d2, s2 = gauss_newton_distance(r, state.f_info.jac.as_matrix(), dof)
+    if structure is not None:  # the block-structured descent's Jacobian: d² by its block QR
+        d2, s2 = block_distance(state.descent_state, structure), jnp.sum(r * r) / max(dof, 1)
+    else:
+        d2, s2 = gauss_newton_distance(r, state.f_info.jac.as_matrix(), dof)
     return (state.num_accepted_steps >= 1) & (d2 <= sigma_tol ** 2 * jnp.minimum(1.0, s2))
 
 
@@ -203,7 +217,8 @@ class _GaussNewtonFamily(optx.AbstractGaussNewton):
         done, result = super().terminate(fn, y, args, options, state, tags)
         if not self.sigma_tol:
             return done, result
-        near = jnp.invert(done) & near_minimum(state, self.sigma_tol, self.dof)
+        structure = getattr(self.descent, "structure", None)
+        near = jnp.invert(done) & near_minimum(state, self.sigma_tol, self.dof, structure)
         return done | near, optx.RESULTS.where(near, optx.RESULTS.successful, result)
 
 
@@ -245,9 +260,14 @@ class LevenbergMarquardt(_GaussNewtonFamily):
         return done | hopeless, optx.RESULTS.where(hopeless, optx.RESULTS.nonlinear_divergence, result)
 
 
-def _optx_solver(o: SolverOptions, dof: int):
-    """The optimistix solver of ``o`` for a fit with ``dof`` degrees of freedom."""
+def _optx_solver(o: SolverOptions, dof: int, structure=None):
+    """The optimistix solver of ``o`` for a fit with ``dof`` degrees of freedom;
+    Levenberg–Marquardt with the block-QR descent when the Jacobian has a ``structure``
+    (:class:`fitting._structured.StructuredDampedNewtonDescent`)."""
     least_squares = {"lm": LevenbergMarquardt, "gauss-newton": GaussNewton, "dogleg": Dogleg}
+    if o.method == "lm" and structure is not None:
+        return LevenbergMarquardt(rtol=o.rtol, atol=o.atol, sigma_tol=o.sigma_tol, dof=dof,
+                                  descent=StructuredDampedNewtonDescent(structure))
     if o.method in least_squares:
         return least_squares[o.method](rtol=o.rtol, atol=o.atol, sigma_tol=o.sigma_tol, dof=dof)
     return optx.BFGS(rtol=o.rtol, atol=o.atol)
@@ -296,7 +316,8 @@ def _solve_function(objective: Objective, o: SolverOptions):
 
         return solve
 
-    solver = _optx_solver(o, objective.n_points - objective.n_parameters)
+    structure = structure_for(objective, o.structure, o.method)
+    solver = _optx_solver(o, objective.n_points - objective.n_parameters, structure)
 
     if o.method == "bfgs":  # BFGS needs only the gradient: plain reverse mode
         def residuals(u, args_optics):
@@ -317,7 +338,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
     # the model values and residuals as its by-products, _statistics_function) times the
     # derivative of z(u): optimistix keeps it, as the auxiliary output of its last accepted point,
     # which is the solution — so the compiled fit holds one copy of the model's Jacobian, not two.
-    fn = jacobian_with_statistics(objective)
+    fn = jacobian_with_statistics(objective, structure)
 
     def solve(u0, args, optics, give_up):
         # the give-up rule: Levenberg–Marquardt only (its terminate reads it)
@@ -353,7 +374,7 @@ def hold_on_bounds(layout, x):
     return jnp.where(lo, lower, jnp.where(hi, upper, x))
 
 
-def jacobian_with_statistics(objective: Objective):
+def jacobian_with_statistics(objective: Objective, structure=None):
     r"""``fn(u, (args, optics)) -> (r, ((model, residuals, penalty), J))``: the residual
     vector of the solver's coordinates ``u`` for optimistix (``has_aux=True``), at
     :math:`z = x/s`, :math:`x` = :func:`hold_on_bounds` of ``layout.to_physical(u)``, and as
@@ -365,13 +386,19 @@ def jacobian_with_statistics(objective: Objective):
     :math:`D = \partial z/\partial u` (zero columns for components held on a bound), applied
     as a dense product (a custom JVP, as :func:`dense_jacobian`): linearising ``fn`` costs one
     ``jacfwd`` of the model. Tangents of ``args`` (never used by the solvers) are propagated
-    exactly by a separate JVP."""
+    exactly by a separate JVP.
+
+    With a ``structure`` (:class:`fitting._structured.Structure`) the Jacobian is formed and
+    applied in compressed form (:func:`fitting._structured.structured_jacobian_with_statistics`)."""
     layout = objective.layout
     scale = jnp.asarray(layout.scale)
     parts = _residuals_and_parts(objective)
 
     def z_of(u):
         return hold_on_bounds(layout, layout.to_physical(u)) / scale
+
+    if structure is not None:
+        return structured_jacobian_with_statistics(objective, structure, parts, z_of, _traced_once)
 
     def evaluate(u, args_optics):
         def value_twice(z):  # the Jacobian's function and, as aux, its value and by-products: one pass
@@ -486,11 +513,14 @@ def _residuals_and_parts(objective: Objective):
     return residuals_and_parts
 
 
-def _statistics_function(objective: Objective):
+def _statistics_function(objective: Objective, structure=None):
     """Pure ``(x, args, optics) -> (model spectra, weighted data residuals, penalty, J)``, J the
-    Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units)."""
+    Jacobian of the full residual vector w.r.t. ``x / scale`` (scaled physical units; in
+    compressed form with a ``structure``)."""
     scale = jnp.asarray(objective.layout.scale)
     residuals_and_parts = _residuals_and_parts(objective)
+    if structure is not None:
+        return structured_statistics_function(objective, structure, residuals_and_parts)
 
     def stats(x, args, optics):
         # one forward pass shared by the model, the residuals and the Jacobian
@@ -576,7 +606,8 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
         cache[key] = _host_fit(objective, o, batched)
     if key not in cache:
         solve = _solve_function(objective, o)
-        stats = _statistics_function(objective)
+        structure = structure_for(objective, o.structure, o.method)
+        stats = _statistics_function(objective) if structure is None else _statistics_function(objective, structure)
 
         def run(start, args, optics, give_up):
             with traced_checks_off():  # trial points are the solver's business (traced_checks_off)
@@ -645,10 +676,14 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
 
     def statistics(x, args, optics):
         with traced_checks_off():
-            return _statistics_function(objective)(x, args, optics)
+            return _statistics_function(objective, structure_for(objective, o.structure, o.method))(x, args, optics)
 
     res_fn = fit_jit(residuals)  # one fit at a time on the host (multi-starts too): compile time dominates
-    jac_fn = fit_jit(jax.jacfwd(residuals))
+    structure = structure_for(objective, o.structure, o.method)
+    if structure is None:
+        jac_fn = fit_jit(jax.jacfwd(residuals))
+    else:  # compressed forward mode, handed to scipy as a sparse matrix (its TRF then takes LSMR steps)
+        jac_fn = sparse_jacobian_function(fit_jit(compressed_jacobian_function(residuals, structure)), structure)
     stats = fit_jit(statistics)
 
     def one(z0, args, optics, give_up=None):  # no give-up rule on the host
@@ -656,7 +691,8 @@ def _host_fit(objective: Objective, o: SolverOptions, batched: bool):
         sol = least_squares(
             lambda z: np.asarray(res_fn(z, args, optics), dtype=float),
             z0,
-            jac=lambda z: np.asarray(jac_fn(z, args, optics), dtype=float),
+            jac=lambda z: jac_fn(z, args, optics) if structure is not None else np.asarray(jac_fn(z, args, optics),
+                                                                                            dtype=float),
             bounds=(lower, upper), method="trf", x_scale=1.0,
             xtol=o.rtol, ftol=o.rtol, gtol=o.gtol, max_nfev=o.max_steps,
         )
@@ -724,7 +760,8 @@ def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, arg
     candidate = (status != NONFINITE) & np.all(np.isfinite(x), axis=-1) & active.any(axis=-1)
     if not candidate.any():
         return out, settled, how
-    J = np.asarray(out.jacobian, float)  # (N, M, P) w.r.t. z = x / scale
+    # (N, M, P) w.r.t. z = x / scale (decompressed: only fits touching a bound get here)
+    J = out.jacobian.dense() if isinstance(out.jacobian, CompressedJacobian) else np.asarray(out.jacobian, float)
     r = np.concatenate([np.asarray(a, float).reshape(n, -1) for a in out.residuals]
                        + [np.asarray(out.penalty, float).reshape(n, -1)], axis=-1)
     with np.errstate(invalid="ignore"):
@@ -748,7 +785,7 @@ def settle_on_bounds(objective: Objective, o: SolverOptions, out: FitOutput, arg
         settled[rows] = s2
         how[rows] = np.where(h2 == BY_LBFGSB, BY_LBFGSB, RESTARTED)
         return _put(out, again, rows), settled, how
-    bounded = SolverOptions("lbfgsb", o.rtol, o.atol, o.gtol, o.max_steps)
+    bounded = SolverOptions("lbfgsb", o.rtol, o.atol, o.gtol, o.max_steps, structure=o.structure)
     how[rows] = BY_LBFGSB
     return _put(out, _refit(objective, bounded, out, rows, sub), rows), settled, how
 
@@ -887,7 +924,8 @@ def bound_note(method: str, names: list, settled: bool, finished: int = 0) -> st
 
 def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts: int = 1, seed: int = 0,
         max_steps: int = 256, rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9,
-        sigma_tol: float = 1e-3, scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None):
+        sigma_tol: float = 1e-3, scale_covariance: Optional[bool] = None, rank_rtol: float = 1e-8, progress=None,
+        structure: str = "auto", correlation_limit: float = 0.99):
     """Fit ``objective`` and return a :class:`~fitting.FitResult`.
 
     Args:
@@ -916,12 +954,21 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
             mark a non-identifiable combination.
         progress: multi-start progress — True (a tqdm bar), False, a callable ``f(done,
             total)``, or None (a bar when there are more than 16 starts).
+        structure: ``"auto"`` (default) — spectral parameters free per wavelength (``basis=
+            "free"``) make the Jacobian block-diagonal in wavelength plus a few global columns:
+            it is then formed with one tangent per global and one per spectral block, and the
+            steps and the covariance are solved by block QR (:mod:`fitting._structured`) where
+            that is cheaper than dense; ``"dense"``: never; ``"structured"``: always (an error
+            where the fit has no such structure). The same values and statistics either way.
+        correlation_limit: parameters correlated beyond this magnitude are reported as poorly
+            separable, grouped, with the combination the data determine
+            (``result.separability``; :func:`fitting._statistics.separability_findings`).
 
     Never raises on non-convergence: see ``result.converged`` and ``result.reason``.
     ``x0`` and the result's values are in each parameter's own unit (nm for thicknesses, 1/nm
     for α, dimensionless for n and ρg).
     """
-    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol)
+    o = SolverOptions(method, rtol, atol, gtol, max_steps, sigma_tol, structure)
     if objective.n_parameters == 0:
         raise LayerstackError("the objective has no free parameter")
     if not (isinstance(starts, int) and starts >= 1):
@@ -957,4 +1004,5 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     names = [n for n, b in zip(objective.layout.names, lo | hi) if b]
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                         starts=starts, starts_converged=n_starts_converged, starts_abandoned=n_abandoned,
-                        note=bound_note(method, names, bool(settled[best]), int(finished[best])))
+                        note=bound_note(method, names, bool(settled[best]), int(finished[best])),
+                        correlation_limit=correlation_limit)

@@ -26,6 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._structured import CompressedJacobian, structured_covariance
+from ._structured import zero_columns as compressed_zero_columns
+
 __all__ = [
     "FitStatistics",
     "fit_statistics",
@@ -37,6 +40,12 @@ __all__ = [
     "SIGMA_ESTIMATED",
     "SIGMA_DEFAULT",
     "CORRELATION_LIMIT",
+    "correlated_groups",
+    "trade_off_direction",
+    "describe_trade_off",
+    "separability_findings",
+    "batch_separability",
+    "separability_summary",
 ]
 
 #: σ origins, as reports write them.
@@ -125,8 +134,14 @@ def unresolved_components(null_vectors, log_directions, rank, zero_columns, owne
     Vt = np.asarray(null_vectors)
     P = Vt.shape[-1]
     owner = np.asarray(owner)
-    rows = np.arange(P)
-    null = rows >= np.asarray(rank)[..., None]  # (..., P) rows that are null
+    # only the rows that are null in some fit (none at full rank)
+    first_null = int(np.min(rank)) if np.size(rank) else P
+    if first_null >= P:
+        return np.asarray(zero_columns, bool).copy()
+    Vt = Vt[..., first_null:, :]
+    log_directions = np.asarray(log_directions)[..., first_null:, :]
+    rows = np.arange(first_null, P)
+    null = rows >= np.asarray(rank)[..., None]  # (..., rows) rows that are null
     comp = (np.abs(Vt) > _NULL_COMPONENT) & ~zero_columns[..., None, :] & null[..., :, None]  # (..., row, P)
     out = np.asarray(zero_columns, bool) | comp.any(axis=-2)
     for i in np.unique(owner):
@@ -144,14 +159,15 @@ def unresolved_components(null_vectors, log_directions, rank, zero_columns, owne
 
 def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: bool, scale_covariance=None,
                    rank_rtol: float = 1e-8) -> FitStatistics:
-    """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``)
+    """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``;
+    or a :class:`~fitting._structured.CompressedJacobian`, whose covariance is the structured
+    inverse, :func:`~fitting._structured.structured_covariance`)
     at solutions ``x`` ``(..., P)``; ``data_residuals``: the weighted data residuals, one array
     ``(..., samples, wl)`` per dataset (0 at masked points); ``n_points`` the used data points.
 
     ``scale_covariance``: scale by χ²/dof (σ estimated from residuals); default: unless every
     dataset gives σ. Components with a zero Jacobian column or on a null direction (singular
     value < ``rank_rtol`` × the largest) get NaN standard errors."""
-    J = np.asarray(J, float)
     x = np.asarray(x, float)
     lead = x.shape[:-1]
     P = x.shape[-1]
@@ -160,8 +176,13 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
     dof = int(n_points) - P
     red = chi2 / dof if dof > 0 else np.full(lead, np.nan)
     scaled = (not sigma_given) if scale_covariance is None else bool(scale_covariance)
-    cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
-    zero = np.linalg.norm(J, axis=-2) == 0
+    if isinstance(J, CompressedJacobian):  # block structure: the structured inverse (fitting._structured)
+        cov, sv, rank, Vt, dirs = structured_covariance(J, x, layout.scale, rank_rtol)
+        zero = compressed_zero_columns(J)
+    else:
+        J = np.asarray(J, float)
+        cov, sv, rank, Vt, dirs = linearised_covariance(J, x, layout.scale, rank_rtol)
+        zero = np.linalg.norm(J, axis=-2) == 0
     unresolved = unresolved_components(Vt, dirs, rank, zero, layout.owner)
     s2 = red if scaled else np.ones(lead)
     cov = cov * np.asarray(s2)[..., None, None]
@@ -172,13 +193,17 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
         corr = cov / (d[..., :, None] * d[..., None, :])
     corr = np.where(unresolved[..., :, None] | unresolved[..., None, :], np.nan, corr)
     # unresolved pairs on one null direction: the limit sign(v_i v_j) of their correlation
-    null = np.arange(P) >= np.asarray(rank)[..., None]
-    strong = (np.abs(Vt) > _NULL_COMPONENT) & null[..., :, None] & ~zero[..., None, :]
-    both = strong[..., :, :, None] & strong[..., :, None, :]  # (..., row, P, P)
-    limit = np.sign(Vt[..., :, :, None] * Vt[..., :, None, :])
-    on_null = both.any(axis=-3)
-    lim = np.sum(np.where(both, limit, 0.0), axis=-3)
-    corr = np.where(on_null, np.clip(lim, -1, 1), corr)
+    # (only the rows that are null in some fit: (rows, P, P) per fit, none at full rank)
+    first = int(np.min(rank)) if np.size(rank) else P
+    if first < P:
+        V = np.asarray(Vt)[..., first:, :]
+        null = np.arange(first, P) >= np.asarray(rank)[..., None]
+        strong = (np.abs(V) > _NULL_COMPONENT) & null[..., :, None] & ~zero[..., None, :]
+        both = strong[..., :, :, None] & strong[..., :, None, :]  # (..., row, P, P)
+        limit = np.sign(V[..., :, :, None] * V[..., :, None, :])
+        on_null = both.any(axis=-3)
+        lim = np.sum(np.where(both, limit, 0.0), axis=-3)
+        corr = np.where(on_null, np.clip(lim, -1, 1), corr)
     eye = np.eye(P, dtype=bool)
     corr = np.where(eye & ~np.isnan(np.diagonal(cov, axis1=-2, axis2=-1))[..., None], 1.0, corr)
     origin = SIGMA_ESTIMATED if scaled else (SIGMA_GIVEN if sigma_given else SIGMA_DEFAULT)
@@ -209,3 +234,166 @@ def strong_correlations(correlation, limit: float = CORRELATION_LIMIT) -> list:
     pick = np.isfinite(rho) & (np.abs(rho) > limit)
     order = np.argsort(-np.abs(rho[pick]), kind="stable")
     return [(int(a), int(b), float(r)) for a, b, r in zip(i[pick][order], j[pick][order], rho[pick][order])]
+
+
+def correlated_groups(correlation, limit: float = CORRELATION_LIMIT) -> list:
+    """Groups of components linked by |correlation| > ``limit`` (one fit's ``(P, P)``
+    correlation; the connected components of that graph with two or more members), each an
+    index array, largest first. A parameter correlated beyond the limit with another is in the
+    same group as it, and with everything that one is correlated with."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    c = np.asarray(correlation, float)
+    P = c.shape[-1]
+    with np.errstate(invalid="ignore"):
+        link = np.isfinite(c) & (np.abs(c) > limit) & ~np.eye(P, dtype=bool)
+    if not link.any():
+        return []
+    _, label = connected_components(csr_matrix(link), directed=False)
+    groups = [np.flatnonzero(label == k) for k in np.unique(label)]
+    groups = [g for g in groups if g.size >= 2]
+    return sorted(groups, key=lambda g: (-g.size, g[0]))
+
+
+def _relative_unit(x, scale) -> np.ndarray:
+    """Per component, the unit of a relative change: |x|, or the scale where x = 0."""
+    x = np.asarray(x, float)
+    return np.where(x != 0, np.abs(x), np.asarray(scale, float))
+
+
+def trade_off_direction(covariance, x, scale, members) -> tuple:
+    """``(v, spread)``: the direction along which the components ``members`` are least
+    determined, in relative units (:math:`\\delta x_i / |x_i|`; the top eigenvector of their
+    relative covariance block, largest entry +1), and the ratio of its standard deviation to
+    that of the next direction (how much that one direction dominates). None where their
+    covariance is not finite."""
+    u = _relative_unit(x, scale)[members]
+    C = np.asarray(covariance, float)[np.ix_(members, members)] / np.outer(u, u)
+    if not np.all(np.isfinite(C)):
+        return None, np.nan
+    w, V = np.linalg.eigh(C)
+    v = V[:, -1]
+    v = v / v[np.argmax(np.abs(v))]
+    spread = np.sqrt(w[-1] / w[-2]) if w.size > 1 and w[-2] > 0 else np.inf
+    return v, float(spread)
+
+
+def _power(p: float) -> str:
+    return "" if abs(p - 1) < 0.03 else f"^{p:.2g}"
+
+
+def describe_trade_off(layout, x, members, v) -> dict:
+    """Words for a trade-off direction ``v`` (relative units, :func:`trade_off_direction`) of
+    the components ``members``: ``{"parameters", "groups", "direction", "combination"}``.
+
+    Components of one parameter that move by the same relative amount count as that parameter
+    (α(λ) scaled as a whole); the combination the data determine is the one constant along
+    ``v``: for two positive quantities ``b·a^p`` with :math:`p = -w_b/w_a` (``α·h``: p = 1; a
+    ratio: ``b·a^-1``), ``a`` the one that moves less along ``v`` (so :math:`|p| \\ge 1`);
+    otherwise the components and their relative moves."""
+    owner = np.asarray(layout.owner)
+    x = np.asarray(x, float)
+    groups = []  # (label, weight, components)
+    for i in sorted(set(owner[members]), key=lambda k: int(np.min(np.flatnonzero(owner[members] == k)))):
+        idx = members[owner[members] == i]
+        w = v[np.searchsorted(members, idx)]
+        name = layout.params[int(i)].name
+        total = int(np.sum(owner == i))
+        if np.allclose(w, w[0], rtol=0.05, atol=0.02):
+            label = name if idx.size == total else layout.names[idx[0]] if idx.size == 1 else \
+                f"{name} ({idx.size} of {total} components)"
+            groups.append((label, float(np.mean(w)), idx))
+        else:
+            groups += [(layout.names[j], float(v[np.searchsorted(members, j)]), np.array([j])) for j in idx]
+    shown = groups[:6]
+    direction = ", ".join(f"δ{n}/{n} = {w:+.2g}" for n, w, _ in shown) + (
+        f" and {len(groups) - 6} more" if len(groups) > 6 else "")
+    positive = bool(np.all(x[members] > 0))
+    if len(groups) == 2 and positive:
+        (nb, wb, _), (na, wa, _) = sorted(groups, key=lambda grp: -abs(grp[1]))
+        # constant along v: ln b + p ln a with w_b + p w_a = 0; the exponent on a, which moves less
+        combination = f"{nb}·{na}{_power(-wb / wa)}" if wa != 0 else nb
+        combination = f"{combination} is determined, not {groups[0][0]} and {groups[1][0]} separately"
+    elif len(groups) == 1:
+        combination = (f"the components of {groups[0][0]} are determined only together (moved together they "
+                       "barely change the data)")
+    else:
+        names = ", ".join(n for n, _, _ in shown) + (f" and {len(groups) - 6} more" if len(groups) > 6 else "")
+        combination = f"only combinations of {names} that stay constant along the direction below are determined"
+    return {"parameters": sorted({layout.params[int(i)].name for i in owner[members]}),
+            "groups": [{"name": n, "relative_move": w, "components": [layout.names[j] for j in idx]}
+                       for n, w, idx in groups],
+            "direction": direction, "combination": combination}
+
+
+def separability_findings(layout, x, covariance, correlation, unresolved=None, null_directions=None,
+                          limit: float = CORRELATION_LIMIT) -> list:
+    """The parameters a fit cannot separate, grouped: one finding per group of components
+    linked by |correlation| > ``limit`` (:func:`correlated_groups`), each
+    ``{"kind", "parameters", "components", "max_abs_correlation", "pairs", "combination",
+    "direction", "groups", "spread"}`` — ``kind`` ``"not identifiable"`` when the group holds
+    components the data do not determine at all (``unresolved``, a null direction: its
+    correlations are the ±1 limits), else ``"poorly separable"``; ``combination`` the quantity
+    the data do determine in words (:func:`describe_trade_off`); ``pairs`` the number of pairs
+    beyond the limit in the group (all of them are in ``FitResult.not_separated``);
+    ``null_directions``: rows of :attr:`FitStatistics.log_directions` beyond the rank (the
+    direction of a not-identifiable group is read from the one it lies on)."""
+    c = np.asarray(correlation, float)
+    unresolved = np.zeros(c.shape[-1], bool) if unresolved is None else np.asarray(unresolved, bool)
+    out = []
+    for members in correlated_groups(c, limit):
+        block = c[np.ix_(members, members)]
+        with np.errstate(invalid="ignore"):
+            off = np.abs(block[~np.eye(members.size, dtype=bool)])
+        off = off[np.isfinite(off)]
+        kind = "not identifiable" if unresolved[members].any() else "poorly separable"
+        v, spread = None, np.inf
+        if kind == "not identifiable" and null_directions is not None and len(null_directions):
+            # the null direction it lies on (the covariance, a pseudo-inverse, leaves it out)
+            D = np.asarray(null_directions, float)[:, members]
+            v = D[np.argmax(np.sum(np.abs(D), axis=1))]
+            v = v / v[np.argmax(np.abs(v))] if np.any(v) else None
+        if v is None and kind == "poorly separable":
+            v, spread = trade_off_direction(covariance, x, layout.scale, members)
+        if v is None:  # the sign pattern of the correlation limits with the first member
+            v = np.sign(np.where(np.isfinite(block[0]), block[0], 0.0))
+            v[0] = 1.0
+        words = describe_trade_off(layout, x, members, v)
+        out.append({"kind": kind, "parameters": words["parameters"],
+                    "components": [layout.names[j] for j in members],
+                    "max_abs_correlation": float(off.max()) if off.size else float("nan"),
+                    "pairs": int(np.sum(off > limit) // 2), "combination": words["combination"],
+                    "direction": words["direction"], "groups": words["groups"], "spread": spread})
+    return out
+
+
+def batch_separability(stats: FitStatistics, x, layout, limit: float = CORRELATION_LIMIT) -> list:
+    """:func:`separability_findings` of every fit of a batch (``stats`` with a leading axis of
+    fits, ``x`` ``(N, P)``): one list of findings per fit."""
+    x = np.asarray(x, float)
+    rank = np.asarray(stats.rank)
+    out = []
+    for k in range(x.shape[0]):
+        dirs = np.asarray(stats.log_directions[k])[int(rank[k]):]
+        out.append(separability_findings(layout, x[k], stats.covariance[k], stats.correlation[k],
+                                         stats.unresolved[k], dirs, limit))
+    return out
+
+
+def separability_summary(per_fit: list, limit: float = CORRELATION_LIMIT, at_most: int = 6) -> list:
+    """Summary lines of many fits' findings (:func:`batch_separability`): per kind of finding
+    (the parameters involved), in how many fits, with one fit's combination as example."""
+    counts: dict = {}
+    for findings in per_fit:
+        for f in findings or []:
+            key = (f["kind"], tuple(f["parameters"]))
+            n, example = counts.get(key, (0, f["combination"]))
+            counts[key] = (n + 1, example)
+    lines = []
+    for i, ((kind, params), (n, example)) in enumerate(sorted(counts.items(), key=lambda kv: -kv[1][0])):
+        if i == at_most:
+            lines.append(f"  … {len(counts) - i} more kinds of inseparable parameters (see each fit's findings)")
+            break
+        lines.append(f"  {n} fit(s): {kind} (|ρ| > {limit:g}): {', '.join(params)} — e.g. {example}")
+    return lines

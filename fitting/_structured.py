@@ -1,0 +1,630 @@
+r"""Structured least squares: Jacobians that are block-diagonal in wavelength plus a few
+global columns, and the solves and covariances that exploit them.
+
+A spectral parameter free at every wavelength (α(λ), ρg(λ), n(λ), k(λ) with ``basis="free"``:
+an identity basis) has one component per model wavelength, and the model at wavelength
+:math:`\lambda_i` depends on component :math:`i` alone. The Jacobian of the residual vector of
+such a fit is then
+
+.. math::
+
+    J = \begin{pmatrix} J^s_1 & & & J^g_1\\ & \ddots & & \vdots\\ & & J^s_W & J^g_W\\
+        & & & J^g_0 \end{pmatrix}
+
+— per wavelength :math:`w` the ``k`` residual rows at :math:`w` (every dataset and sample), a
+``(k, b)`` block :math:`J^s_w` over the ``b`` spectral values at :math:`w` (one per free
+spectral parameter and, for a per-sample one, per sample), and ``g`` global columns (thicknesses,
+dispersion coefficients, basis coefficients, instrument offsets) shared by all rows; rows that
+depend on the globals alone (:math:`J^g_0`: smoothness penalties of basis parameters) close it.
+A fit of two sheets for one n and α(λ) at 652 wavelengths has ``b = 1``, ``g = 1``: 653 columns
+of which 651 are one diagonal.
+
+**Compressed forward mode.** Wavelength :math:`w`'s rows depend only on the spectral values at
+:math:`w`, so one tangent that moves *all* wavelengths of a spectral block at once gives in row
+:math:`r` exactly :math:`\partial r / \partial v_{w(r)}` (Curtis, Powell & Reid 1974: columns
+that share no row are computed together). The Jacobian is formed with ``g + b`` tangents — one
+per global, one per spectral block — instead of one per component: :class:`CompressedJacobian`
+``K`` ``(M, g + b)``. :func:`find_structure` finds the structure from the parameters and the
+datasets' shapes and :func:`verify_structure` checks it numerically once per objective (a
+second compressed Jacobian with random weights per wavelength must equal the first, weighted:
+a model that couples wavelengths — a bandwidth, a colour conversion — fails it and is solved
+densely).
+
+**Solves.** The Levenberg–Marquardt step solves
+:math:`\min_\delta \|J\delta - r\|^2 + \lambda\|\delta\|^2` (:class:`optimistix.DampedNewtonDescent`'s
+system, λ = 1/step size) by block QR (the sparse QR of bundle adjustment; Triggs et al. 2000,
+§6): per wavelength the QR of
+:math:`\begin{pmatrix} J^s_w & J^g_w & r_w\\ \sqrt\lambda I & 0 & 0\end{pmatrix}` leaves
+:math:`(R_w, G_w, t_w)` and a trailing block :math:`(H_w, h_w)` that involves the globals only;
+the QR of all trailing blocks, the global-only rows and :math:`\sqrt\lambda I_g` gives
+:math:`(R_g, t_g)`; then :math:`R_g\delta_g = t_g`, :math:`R_w\delta_w = t_w - G_w\delta_g`.
+That is the Schur complement over the globals, formed orthogonally (the condition number is
+not squared as in the normal equations). Cost per step: ``W`` QRs of ``(k + b) × (b + g + 1)``
+and one of ``≈ W min(k, g+1) × (g + 1)`` — linear in the number of wavelengths.
+
+**Covariance.** With the same factorisation of the column-normalised Jacobian
+(:func:`structured_covariance`), :math:`R = \begin{pmatrix} R_s & G\\ 0 & R_g\end{pmatrix}`
+(:math:`R_s` block-diagonal) and :math:`C = (J^\top J)^{-1} = R^{-1}R^{-\top}`:
+:math:`C_{gg} = R_g^{-1}R_g^{-\top}`, :math:`C_{sg} = -W R_g^{-\top}`,
+:math:`C_{ss} = \operatorname{blockdiag}(R_w^{-1}R_w^{-\top}) + W W^\top` with
+:math:`W_w = R_w^{-1}G_w R_g^{-1}` — no dense ``P × P`` inverse. The rank test reads the
+singular values of the block pivots :math:`R_w` and :math:`R_g`; a fit that fails it (a
+direction the data do not determine) gets the dense SVD analysis of
+:mod:`fitting._statistics` from the decompressed Jacobian, which names that direction.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.custom_derivatives import SymbolicZero
+
+from layerstack_jax import LayerstackError
+from layerstack_jax._validate import traced_checks_off
+
+__all__ = ["Structure", "CompressedJacobian", "find_structure", "verify_structure", "structure_for",
+           "STRUCTURE_MODES", "StructuredDampedNewtonDescent", "structured_jacobian_with_statistics",
+           "structured_statistics_function", "structured_covariance", "damped_block_solve", "dense_of",
+           "compressed_jacobian_function", "sparse_jacobian_function"]
+
+#: ``structure=`` of :func:`~fitting.fit`: choose, always the dense Jacobian, or insist on the structured one.
+STRUCTURE_MODES = ("auto", "dense", "structured")
+
+
+class Structure:
+    """The block structure of an objective's residual Jacobian (module docstring). Compared and
+    hashed by identity: one per objective, kept in its compiled cache, so it can sit in the
+    static part of pytrees and solvers.
+
+    ``P`` free components, ``M`` residual rows, ``W`` wavelengths; ``global_index`` ``(g,)``:
+    the free components that are globals; ``spectral_index`` ``(W, b)``: the free component of
+    spectral block ``t`` at wavelength ``w`` (``P`` where that value is fixed: absent);
+    ``block_rows`` ``(W, k)``: the residual rows at each wavelength; ``global_rows``: rows that
+    depend on the globals alone; ``row_spectral`` ``(M, b)``: per row, the free components of its
+    wavelength (``P`` for global rows); ``seeds`` ``(g + b, P)``: the compressed tangents."""
+
+    def __init__(self, P: int, M: int, global_index, spectral_index, block_rows, global_rows, names):
+        self.P, self.M = int(P), int(M)
+        self.global_index = np.asarray(global_index, int)
+        self.spectral_index = np.asarray(spectral_index, int)
+        self.block_rows = np.asarray(block_rows, int)
+        self.global_rows = np.asarray(global_rows, int)
+        self.g = int(self.global_index.size)
+        self.W, self.b = self.spectral_index.shape
+        self.k = int(self.block_rows.shape[1])
+        self.present = self.spectral_index < self.P
+        row_wl = np.full(self.M, -1)
+        row_wl[self.block_rows.ravel()] = np.repeat(np.arange(self.W), self.k)
+        self.row_spectral = np.where(row_wl[:, None] >= 0, self.spectral_index[np.maximum(row_wl, 0)], self.P)
+        seeds = np.zeros((self.g + self.b, self.P))
+        seeds[np.arange(self.g), self.global_index] = 1.0
+        for t in range(self.b):
+            idx = self.spectral_index[:, t]
+            seeds[self.g + t, idx[idx < self.P]] = 1.0
+        self.seeds = seeds
+        self.names = tuple(names)  # the spectral blocks, for messages
+
+    @property
+    def tangents(self) -> int:
+        return self.g + self.b
+
+    def __repr__(self) -> str:
+        return (f"Structure(P={self.P}, M={self.M}, wavelengths={self.W}, spectral blocks={self.b} "
+                f"({', '.join(self.names)}), globals={self.g}, rows per wavelength={self.k})")
+
+
+@jax.tree_util.register_pytree_node_class
+class CompressedJacobian:
+    """The Jacobian of a fit's residual vector in compressed form: ``K`` ``(..., M, g + b)``,
+    column ``j < g`` the global ``structure.global_index[j]``, column ``g + t`` the values of
+    spectral block ``t``, row ``r`` holding the derivative w.r.t. the value at its own
+    wavelength (:class:`Structure`). A pytree (``K`` its leaf), so batched fits, ``vmap`` and
+    ``jax.tree.map`` carry it like the dense ``(M, P)`` array it stands for
+    (:meth:`dense`)."""
+
+    def __init__(self, K, structure: Structure):
+        self.K = K
+        self.structure = structure
+
+    def tree_flatten(self):
+        return (self.K,), self.structure
+
+    @classmethod
+    def tree_unflatten(cls, structure, children):
+        return cls(children[0], structure)
+
+    @property
+    def shape(self) -> tuple:
+        """The dense shape ``(..., M, P)``."""
+        return tuple(np.shape(self.K)[:-1]) + (self.structure.P,)
+
+    def dense(self) -> np.ndarray:
+        """The dense ``(..., M, P)`` Jacobian (NumPy)."""
+        return dense_of(np.asarray(self.K, float), self.structure)
+
+    def __repr__(self) -> str:
+        return f"CompressedJacobian(K {np.shape(self.K)}, {self.structure!r})"
+
+
+def dense_of(K, st: Structure) -> np.ndarray:
+    """Decompress ``K`` ``(..., M, g + b)`` into the dense ``(..., M, P)`` Jacobian (NumPy)."""
+    K = np.asarray(K, float)
+    lead = K.shape[:-2]
+    J = np.zeros(lead + (st.M, st.P + 1))
+    J[..., st.global_index] = K[..., :st.g]
+    rows = np.broadcast_to(np.arange(st.M)[:, None], st.row_spectral.shape)
+    J[..., rows, st.row_spectral] = K[..., st.g:]
+    return J[..., :st.P]
+
+
+def apply_compressed(K, st: Structure, dz):
+    r""":math:`J\,\delta z` from the compressed ``K`` ``(M, g + b)`` and ``dz`` ``(P,)`` (JAX;
+    linear in ``dz``, so JAX transposes it for :math:`J^\top r`)."""
+    ext = jnp.concatenate([dz, jnp.zeros((1,), dz.dtype)])
+    out = K[:, st.g:] * ext[st.row_spectral]
+    out = jnp.sum(out, axis=-1)
+    if st.g:
+        out = out + K[:, :st.g] @ dz[st.global_index]
+    return out
+
+
+# --------------------------------------------------------------------------- finding the structure
+def _identity_basis(p) -> bool:
+    B = p.basis
+    return B is not None and B.shape[0] == B.shape[1] and np.array_equal(B, np.eye(B.shape[0]))
+
+
+def find_structure(objective) -> tuple[Optional[Structure], str]:
+    """``(structure, "")`` of ``objective`` from its parameters and datasets, or ``(None,
+    reason)`` when its Jacobian has no block structure to exploit (no free spectral parameter;
+    a CIELAB dataset, which mixes wavelengths; a smoothness penalty on a free spectrum).
+    Not yet checked numerically (:func:`verify_structure`)."""
+    layout = objective.layout
+    W = objective.wavelength.size
+    P = layout.size
+    free_of = np.full(layout.full_x0.size, P)  # full coefficient index -> free index (P: fixed)
+    free_of[layout.free_index] = np.arange(P)
+    blocks, names = [], []
+    spectral = np.zeros(P, bool)
+    for i, p in enumerate(layout.params):
+        if not _identity_basis(p) or p.m != W:
+            continue
+        if p.parameter.smoothness > 0:
+            return None, f"{p.name} is free per wavelength with a smoothness penalty (it couples wavelengths)"
+        off = layout.offsets[i]
+        rows = p.x0.shape[0] if p.per_sample else 1
+        for s in range(rows):
+            idx = free_of[off + s * W + np.arange(W)]
+            if np.all(idx == P):
+                continue
+            blocks.append(idx)
+            names.append(p.name + (f"[sample {s}]" if p.per_sample else ""))
+            spectral[idx[idx < P]] = True
+    if not blocks:
+        return None, "no parameter is free per wavelength (basis 'free')"
+    for ds in objective.datasets:
+        if ds.colour is not None:
+            return None, f"dataset {ds.label} compares CIELAB colours, which mix all wavelengths"
+    rows, offset, block_rows = 0, 0, []
+    for i, ds in enumerate(objective.datasets):
+        n = objective.samples_of(i)
+        block_rows.append(offset + np.arange(n)[None, :] * W + np.arange(W)[:, None])  # (W, n)
+        offset += n * W
+    n_pen = int(jax.eval_shape(objective.penalty, jnp.asarray(layout.x0)).shape[0])
+    M = offset + n_pen
+    spectral_index = np.stack(blocks, axis=1)  # (W, b)
+    global_index = np.nonzero(~spectral)[0]
+    st = Structure(P, M, global_index, spectral_index, np.concatenate(block_rows, axis=1),
+                   np.arange(offset, M), names)
+    return st, ""
+
+
+def _compressed_jacobian(fn, z, seeds):
+    """``(K, aux)``: ``fn(z) -> (flat, aux)`` differentiated along the rows of ``seeds``
+    ``(T, P)`` by forward mode (``T`` tangents): ``K`` ``(M, T)``."""
+    return jax.jacfwd(lambda c: fn(z + c @ seeds), has_aux=True)(jnp.zeros(seeds.shape[0], z.dtype))
+
+
+def verify_structure(objective, st: Structure, residuals_and_parts) -> tuple[bool, str]:
+    """Check numerically, once, at the objective's start, that row ``r`` depends on the
+    spectral values at its own wavelength only: the compressed Jacobian with seeds weighted by
+    random factors ``ρ_w ∈ [1, 2]`` per wavelength must equal ``ρ_{w(r)}`` times the plain one
+    (a model that couples wavelengths gives sums of other columns there), and the global-only
+    rows must not depend on spectral values. ``(ok, reason)``."""
+    rng = np.random.default_rng(1)
+    rho = rng.uniform(1.0, 2.0, st.W)
+    weighted = st.seeds.copy()
+    for t in range(st.b):
+        idx = st.spectral_index[:, t]
+        ok = idx < st.P
+        weighted[st.g + t, idx[ok]] = rho[ok]
+    z0 = jnp.asarray(objective.layout.x0 / objective.layout.scale)
+    args = objective.args()
+
+    def both(z):  # one forward pass with both sets of tangents: one copy of the model to compile
+        f = lambda v: residuals_and_parts(v, args, objective.optics)  # noqa: E731
+        with traced_checks_off():
+            return _compressed_jacobian(f, z, jnp.concatenate([jnp.asarray(st.seeds), jnp.asarray(weighted)]))[0]
+
+    K = np.asarray(jax.jit(both)(z0))
+    K1, K2 = K[:, :st.tangents], K[:, st.tangents:]
+    Ks1, Ks2 = K1[:, st.g:], K2[:, st.g:]
+    if not (np.all(np.isfinite(Ks1)) and np.all(np.isfinite(Ks2))):
+        return False, "the Jacobian at the start is not finite"
+    row_wl = np.full(st.M, -1)
+    row_wl[st.block_rows.ravel()] = np.repeat(np.arange(st.W), st.k)
+    factor = np.where(row_wl >= 0, rho[np.maximum(row_wl, 0)], 0.0)[:, None]
+    expected = factor * Ks1
+    scale = np.max(np.abs(Ks1), axis=0, keepdims=True) + 1e-300
+    bad = np.abs(Ks2 - expected) > 1e-9 * (np.abs(Ks2) + np.abs(expected)) + 1e-12 * scale
+    if np.any(bad):
+        r, t = np.argwhere(bad)[0]
+        where = f"residual row {r}" + (f" (wavelength {objective.wavelength[row_wl[r]]:g} nm)" if row_wl[r] >= 0
+                                         else " (a penalty)")
+        return False, (f"{where} depends on the values of {st.names[t]} at other wavelengths (the model mixes "
+                       "wavelengths: a bandwidth, a colour conversion or an interpolation)")
+    return True, ""
+
+
+def structure_for(objective, mode: str, method: str) -> Optional[Structure]:
+    """The :class:`Structure` a fit of ``objective`` uses under ``mode``
+    (:data:`STRUCTURE_MODES`), found and verified once and cached on the objective; None for
+    the dense path. ``"auto"`` takes it when it exists and the compressed tangents are at most
+    half the components (``g + b ≤ P/2``): below that the dense Jacobian is as cheap.
+    ``"structured"`` raises :class:`LayerstackError` saying why when there is none."""
+    if mode not in STRUCTURE_MODES:
+        raise LayerstackError(f"structure must be one of {STRUCTURE_MODES}, got {mode!r}")
+    if mode == "dense":
+        return None
+    from ._solve import _residuals_and_parts, compiled_cache  # here: _solve imports this module
+
+    cache = compiled_cache(objective)
+    if "structure" not in cache:
+        cache["structure"] = find_structure(objective)
+    st, why = cache["structure"]
+    if st is None or (mode == "auto" and 2 * st.tangents > st.P):
+        if mode == "structured":
+            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
+        return None
+    if "structure_checked" not in cache:  # once, and only where it would be used
+        ok, why = verify_structure(objective, st, _residuals_and_parts(objective))
+        cache["structure_checked"] = (ok, why)
+    ok, why = cache["structure_checked"]
+    if not ok:
+        if mode == "structured":
+            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
+        return None
+    return st
+
+
+# --------------------------------------------------------------------------- the solve
+def _qr_r(a):
+    return jnp.linalg.qr(a, mode="r")
+
+
+def _eliminate(A, b: int):
+    """Householder reflections of the first ``b`` columns of every matrix of the batch ``A``
+    ``(W, rows, cols)``, vectorised over the batch (``b`` is small and static: the reflections
+    are unrolled): rows ``:b`` of the result hold the ``b`` rows of ``R`` (upper triangular in
+    the first ``b`` columns), rows ``b:`` zeros in those columns and the rest reflected along —
+    what the remaining columns' least-squares problem needs. (XLA's batched QR of many tiny
+    matrices is a loop over the batch, far slower.)"""
+    for j in range(b):
+        x = A[:, j:, j]  # (W, rows - j)
+        norm = jnp.sqrt(jnp.sum(x * x, axis=-1))
+        sign = jnp.where(x[:, 0] < 0, -1.0, 1.0)
+        alpha = -sign * norm
+        v = x.at[:, 0].add(-alpha)
+        vn = jnp.sqrt(jnp.sum(v * v, axis=-1))
+        v = v / jnp.where(vn > 0, vn, 1.0)[:, None]  # a zero column: no reflection
+        tail = A[:, j:, :]
+        tail = tail - 2.0 * v[:, :, None] * jnp.einsum("wr,wrc->wc", v, tail)[:, None, :]
+        A = A.at[:, j:, :].set(tail)
+    return A
+
+
+def damped_block_solve(K, r, lam, st: Structure):
+    r"""``(δ, ‖t‖²)``: the solution of :math:`\min_\delta \|J\delta - r\|^2 + \lambda\|\delta\|^2`
+    (``δ`` ``(P,)``) for the Jacobian in compressed form ``K`` ``(M, g + b)`` by the block QR of
+    the module docstring, and :math:`\|t\|^2 = r^\top J (J^\top J + \lambda I)^{-1} J^\top r`
+    (the squared length of the projection of ``r`` on the damped column space)."""
+    g, b, W = st.g, st.b, st.W
+    dtype = K.dtype
+    Kb = K[st.block_rows]  # (W, k, g + b)
+    rb = r[st.block_rows]  # (W, k)
+    present = jnp.asarray(st.present)
+    root = jnp.sqrt(lam)
+    damp = jnp.where(present, root, jnp.ones((), dtype))  # absent values: unit rows, decoupled
+    top = jnp.concatenate([Kb[..., g:], Kb[..., :g], rb[..., None]], axis=-1)
+    eye = jnp.eye(b, dtype=dtype)
+    bottom = jnp.concatenate([eye * damp[:, None, :], jnp.zeros((W, b, g + 1), dtype)], axis=-1)
+    R = _eliminate(jnp.concatenate([bottom, top], axis=-2), b)  # (W, b + k, b + g + 1)
+    Rs, G, t = R[:, :b, :b], R[:, :b, b:b + g], R[:, :b, -1]
+    t = jnp.where(present, t, 0.0)
+    norm2 = jnp.sum(t * t)
+    if g:
+        H = R[:, b:, b:].reshape(-1, g + 1)
+        Kg0 = K[st.global_rows][:, :g]
+        r0 = r[st.global_rows]
+        glob = jnp.concatenate([H, jnp.concatenate([Kg0, r0[:, None]], axis=-1),
+                                jnp.concatenate([root * jnp.eye(g, dtype=dtype), jnp.zeros((g, 1), dtype)], axis=-1)])
+        Rg = _qr_r(glob)[:g + 1]
+        tg = Rg[:g, g]
+        norm2 = norm2 + jnp.sum(tg * tg)
+        dg = jax.scipy.linalg.solve_triangular(Rg[:g, :g], tg, lower=False)
+        rhs = t - jnp.einsum("wij,j->wi", G, dg)
+    else:
+        dg = jnp.zeros((0,), dtype)
+        rhs = t
+    ds = _back_substitute(Rs, rhs)
+    delta = jnp.zeros((st.P + 1,), dtype)
+    delta = delta.at[jnp.asarray(st.spectral_index).ravel()].set(jnp.where(present, ds, 0.0).ravel())
+    if g:
+        delta = delta.at[jnp.asarray(st.global_index)].set(dg)
+    return delta[:st.P], norm2
+
+
+def _back_substitute(R, v):
+    """Solve the upper-triangular ``(W, b, b)`` systems ``R x = v`` (``v`` ``(W, b)``),
+    vectorised over the batch, the ``b`` rows unrolled."""
+    b = R.shape[-1]
+    xs = [None] * b
+    for i in range(b - 1, -1, -1):
+        acc = v[:, i]
+        for j in range(i + 1, b):
+            acc = acc - R[:, i, j] * xs[j]
+        xs[i] = acc / R[:, i, i]
+    return jnp.stack(xs, axis=-1)
+
+
+class _BlockDescentState(eqx.Module):
+    K: jax.Array
+    residual: jax.Array
+
+
+class StructuredDampedNewtonDescent(optx.AbstractDescent):
+    """:class:`optimistix.DampedNewtonDescent`'s step — the solution of
+    :math:`\\min \\|J\\delta - r\\|^2 + \\lambda\\|\\delta\\|^2`, λ = 1/step size, moving by
+    :math:`-\\delta` — solved by block QR (:func:`damped_block_solve`) for a Jacobian of
+    :class:`Structure` ``structure``.
+
+    ``query`` (once per accepted point) reads the Jacobian in compressed form from optimistix's
+    linearisation itself — ``f_info.jac.mv`` of the ``g + b`` compressed seeds, each a cheap
+    product (the residual function's JVP rule applies the compressed Jacobian,
+    :func:`structured_jacobian_with_statistics`) — so the descent needs nothing but the public
+    :class:`optimistix.AbstractDescent` interface, and composes with any search."""
+
+    structure: Structure = eqx.field(static=True)
+
+    def init(self, y, f_info_struct):
+        st = self.structure
+        return _BlockDescentState(jnp.zeros((st.M, st.tangents), y.dtype), jnp.zeros((st.M,), y.dtype))
+
+    def query(self, y, f_info, state):
+        seeds = jnp.asarray(self.structure.seeds, y.dtype)
+        K = jax.vmap(f_info.jac.mv)(seeds).T  # (M, g + b): J_u along the compressed seeds
+        return _BlockDescentState(K, f_info.residual)
+
+    def step(self, step_size, state):
+        eps = jnp.finfo(step_size.dtype).eps
+        pred = step_size > eps
+        lam = jnp.where(pred, 1 / jnp.where(pred, step_size, 1), jnp.finfo(step_size.dtype).max)
+        delta, _ = damped_block_solve(state.K, state.residual, lam, self.structure)
+        return -delta, optx.RESULTS.successful
+
+
+def block_distance(descent_state, structure: Structure):
+    r"""``d²`` of :func:`fitting._solve.gauss_newton_distance` from a
+    :class:`StructuredDampedNewtonDescent` state: :math:`g^\top (J^\top J)^{+} g = \|P_J r\|^2`
+    by the block QR, with directions of eigenvalue below 1e-12 of the largest column norm²
+    damped away (as the dense rule leaves them out)."""
+    K, r = descent_state.K, descent_state.residual
+    st = structure
+    col2 = jnp.concatenate([jnp.sum(K[:, :st.g] ** 2, axis=0),
+                            jnp.sum(K[st.block_rows][..., st.g:] ** 2, axis=1).ravel()])
+    lam = 1e-12 * jnp.maximum(jnp.max(col2), jnp.finfo(K.dtype).tiny)
+    return damped_block_solve(K, r, lam, st)[1]
+
+
+# --------------------------------------------------------------------------- residual functions
+def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_parts, z_of, traced_once):
+    r""":func:`fitting._solve.jacobian_with_statistics` with the Jacobian formed in compressed
+    form (``g + b`` tangents, :func:`_compressed_jacobian`) and applied by
+    :func:`apply_compressed` in the JVP rule: ``fn(u, (args, optics)) -> (r, ((model,
+    residuals, penalty), CompressedJacobian))``."""
+    seeds = jnp.asarray(st.seeds)
+
+    def evaluate(u, args_optics):
+        def value_twice(z):
+            flat, by = residuals_and_parts(z, *args_optics)
+            return flat, (flat, by)
+
+        K, (r, by) = _compressed_jacobian(value_twice, z_of(u), seeds.astype(u.dtype))
+        return r, (by, CompressedJacobian(K, st))
+
+    evaluate = traced_once(jax.jit(evaluate))
+
+    @jax.custom_jvp
+    def g(u, args_optics):
+        return evaluate(u, args_optics)
+
+    def g_jvp(primals, tangents):
+        from ._solve import _with_args_tangent
+
+        u, args_optics = primals
+        du, dargs = tangents
+        r, aux = evaluate(u, args_optics)
+        K = aux[1].K
+        if isinstance(du, SymbolicZero):
+            out = jnp.zeros_like(r)
+        else:
+            out = apply_compressed(K, st, jax.jvp(z_of, (u,), (du,))[1])  # z(u) acts componentwise
+        out = _with_args_tangent(out, lambda a: residuals_and_parts(z_of(u), *a)[0], args_optics, dargs)
+        return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
+
+    g.defjvp(g_jvp, symbolic_zeros=True)
+    return g
+
+
+def structured_statistics_function(objective, st: Structure, residuals_and_parts):
+    """:func:`fitting._solve._statistics_function` with the Jacobian in compressed form:
+    ``(x, args, optics) -> (model, residuals, penalty, CompressedJacobian)``."""
+    scale = jnp.asarray(objective.layout.scale)
+    seeds = jnp.asarray(st.seeds)
+
+    def stats(x, args, optics):
+        K, (model, res, pen) = _compressed_jacobian(lambda z: residuals_and_parts(z, args, optics),
+                                                    x / scale, seeds.astype(x.dtype))
+        return model, res, pen, CompressedJacobian(K, st)
+
+    return stats
+
+
+def compressed_jacobian_function(residuals, st: Structure):
+    """``(z, args, optics) -> K`` ``(M, g + b)``: the compressed Jacobian of the pure
+    ``residuals(z, args, optics)`` (``g + b`` forward-mode tangents)."""
+    seeds = jnp.asarray(st.seeds)
+
+    def K(z, args, optics):
+        return _compressed_jacobian(lambda v: (residuals(v, args, optics), None), z, seeds.astype(z.dtype))[0]
+
+    return K
+
+
+def sparse_jacobian_function(compressed, st: Structure):
+    """``(z, args, optics) -> scipy.sparse.csr_matrix`` ``(M, P)`` from a compressed-Jacobian
+    function (:func:`compressed_jacobian_function`): the host solver's (scipy TRF) Jacobian."""
+    from scipy.sparse import csr_matrix
+
+    rows = np.broadcast_to(np.arange(st.M)[:, None], (st.M, st.tangents))
+    cols = np.concatenate([np.broadcast_to(st.global_index, (st.M, st.g)), st.row_spectral], axis=1)
+    keep = cols < st.P
+    rows, cols = rows[keep], cols[keep]
+
+    def jac(z, args, optics):
+        K = np.asarray(compressed(z, args, optics), dtype=float)
+        return csr_matrix((K[keep], (rows, cols)), shape=(st.M, st.P))
+
+    return jac
+
+
+# --------------------------------------------------------------------------- covariance
+def _np_qr_r(a):
+    return np.linalg.qr(a, mode="r")
+
+
+def structured_covariance(J: CompressedJacobian, x, scale, rank_rtol: float):
+    """:func:`fitting._statistics.linearised_covariance` for a Jacobian in compressed form
+    (module docstring): ``(cov, singular_values, rank, null_vectors, log_directions)`` with
+    optional leading batch axes, the same normalisation (columns w.r.t. :math:`\\ln x`, unit
+    length) and the same covariance.
+
+    ``singular_values`` are those of the block pivots :math:`R_w` and :math:`R_g` of the
+    normalised Jacobian (sorted; the same rank in exact arithmetic as the singular values of the
+    whole, which they bound). Fits with full rank get zero ``null_vectors`` and
+    ``log_directions`` (there is no null direction); fits below full rank (or with a
+    non-finite Jacobian) get the dense analysis of their decompressed Jacobian."""
+    from ._statistics import linearised_covariance
+
+    st = J.structure
+    K = np.asarray(J.K, float)
+    x = np.asarray(x, float)
+    scale = np.asarray(scale, float)
+    lead = x.shape[:-1]
+    P, g, b, W = st.P, st.g, st.b, st.W
+    K = K.reshape((-1,) + K.shape[-2:])
+    xs = x.reshape(-1, P)
+    N = K.shape[0]
+    rel = np.where(xs != 0, np.abs(xs) / scale, 1.0)  # (N, P)
+    Kb = K[:, st.block_rows]  # (N, W, k, T)
+    norms = np.zeros((N, P + 1))
+    norms[:, st.global_index] = np.linalg.norm(K[:, :, :g], axis=1)
+    norms[:, st.spectral_index] = np.linalg.norm(Kb[..., g:], axis=2)  # absent ones land in the dummy
+    norms = norms[:, :P] * rel
+    safe = np.where(norms > 0, norms, 1.0)
+    a = rel / safe  # J_normalised = J diag(a)
+    a_ext = np.concatenate([a, np.zeros((N, 1))], axis=1)
+    present = st.present
+    Js = Kb[..., g:] * a_ext[:, st.spectral_index][:, :, None, :]  # (N, W, k, b)
+    Jg = Kb[..., :g] * a[:, None, None, st.global_index]
+    bad = ~(np.all(np.isfinite(Js), axis=(1, 2, 3)) & np.all(np.isfinite(Jg), axis=(1, 2, 3))
+            & np.all(np.isfinite(K), axis=(1, 2)))
+    Js = np.where(bad[:, None, None, None], 0.0, Js)
+    Jg = np.where(bad[:, None, None, None], 0.0, Jg)
+    unit = np.broadcast_to(np.eye(b) * ~present[:, None, :], (N, W, b, b))  # absent values: decoupled unit rows
+    blocks = np.concatenate([np.concatenate([Js, Jg], axis=-1),
+                             np.concatenate([unit, np.zeros((N, W, b, g))], axis=-1)], axis=-2)
+    R = _np_qr_r(blocks)  # (N, W, min(k + b, b + g), b + g)
+    Rs, G = R[..., :b, :b], R[..., :b, b:]
+    sv_blocks = np.linalg.svd(Rs * present[None, :, :, None] * present[None, :, None, :], compute_uv=False)
+    if g:
+        H = R[..., b:, b:].reshape(N, -1, g)
+        Jg0 = K[:, st.global_rows, :g] * a[:, None, st.global_index]
+        Jg0 = np.where(bad[:, None, None], 0.0, Jg0)
+        Rg = _np_qr_r(np.concatenate([H, Jg0], axis=1))[:, :g]  # (N, g, g)
+        if Rg.shape[1] < g:  # fewer rows than globals: rank deficient
+            Rg = np.concatenate([Rg, np.zeros((N, g - Rg.shape[1], g))], axis=1)
+        sv_g = np.linalg.svd(Rg, compute_uv=False)
+    else:
+        Rg = np.zeros((N, 0, 0))
+        sv_g = np.zeros((N, 0))
+    absent = int((~present).sum())
+    sv = np.sort(np.concatenate([sv_blocks.reshape(N, -1), sv_g], axis=1), axis=1)[:, ::-1]
+    sv = sv[:, :sv.shape[1] - absent]  # the zeros of the absent values
+    top = sv[:, :1]
+    keep = (sv > rank_rtol * top) & (top > 0)
+    rank = keep.sum(axis=1)
+    full = (rank == P) & ~bad
+    cov = np.full((N, P, P), np.nan)
+    if full.any():
+        f = np.nonzero(full)[0]
+        n = f.size
+        S = W * b  # block order: the spectral values wavelength by wavelength, then the globals
+        Rs_inv = np.linalg.solve(Rs[f], np.broadcast_to(np.eye(b), Rs[f].shape))  # (n, W, b, b)
+        Rs_inv = Rs_inv * present[None, :, :, None] * present[None, :, None, :]  # absent values: out
+        B = np.zeros((n, S + g, S + g))
+        if g:
+            Rg_inv = np.linalg.solve(Rg[f], np.broadcast_to(np.eye(g), Rg[f].shape))
+            Wm = (Rs_inv @ G[f] @ Rg_inv[:, None]).reshape(n, S, g)  # W_w = R_w^-1 G_w R_g^-1
+            B[:, :S, :S] = Wm @ np.swapaxes(Wm, -1, -2)
+            B[:, :S, S:] = -(Wm @ np.swapaxes(Rg_inv, -1, -2))
+            B[:, S:, :S] = np.swapaxes(B[:, :S, S:], -1, -2)
+            B[:, S:, S:] = Rg_inv @ np.swapaxes(Rg_inv, -1, -2)
+        diag = B[:, :S, :S].reshape(n, W, b, W, b)  # a view: add blockdiag(R_w^-1 R_w^-T)
+        w = np.arange(W)
+        diag[:, w, :, w, :] += np.moveaxis(Rs_inv @ np.swapaxes(Rs_inv, -1, -2), 1, 0)
+        pos = np.empty(P, int)  # free component -> its place in block order
+        sflat = st.spectral_index.ravel()
+        pos[sflat[sflat < P]] = np.flatnonzero(sflat < P)
+        pos[st.global_index] = S + np.arange(g)
+        cn = np.take(np.take(B, pos, axis=1), pos, axis=2)
+        s = a[f] * scale
+        cov[f] = cn * s[:, :, None] * s[:, None, :]
+    Vt = np.zeros((N, P, P))
+    dirs = np.zeros((N, P, P))
+    sv_out = np.where(bad[:, None], np.nan, sv)
+    rank = np.where(bad, P, rank)
+    rest = np.nonzero(~full)[0]
+    if rest.size:  # a direction the data do not determine (or a non-finite Jacobian): the dense analysis names it
+        Jd = dense_of(K[rest], st)
+        c2, sv2, rank2, Vt2, dirs2 = linearised_covariance(Jd, xs[rest], scale, rank_rtol)
+        cov[rest], sv_out[rest], rank[rest], Vt[rest], dirs[rest] = c2, sv2, rank2, Vt2, dirs2
+    return (cov.reshape(lead + (P, P)), sv_out.reshape(lead + (P,)), rank.reshape(lead),
+            Vt.reshape(lead + (P, P)), dirs.reshape(lead + (P, P)))
+
+
+def zero_columns(J: CompressedJacobian) -> np.ndarray:
+    """``(..., P)`` True where the dense Jacobian's column is zero."""
+    st = J.structure
+    K = np.asarray(J.K, float)
+    lead = K.shape[:-2]
+    n = np.zeros(lead + (st.P + 1,))
+    n[..., st.global_index] = np.linalg.norm(K[..., :st.g], axis=-2)
+    Kb = K[..., st.block_rows, st.g:]  # (..., W, k, b)
+    n[..., st.spectral_index] = np.linalg.norm(Kb, axis=-2)
+    return n[..., :st.P] == 0

@@ -148,8 +148,10 @@ def _var(name: str) -> str:
 def structural_degeneracy(objective: Objective) -> list:
     """Degeneracies of ``objective`` by construction, known without computing anything: one
     message per incoherent layer whose thickness and α are both free (only α·h enters Beer's
-    law, Simonot eq. 20: no data can separate them)."""
-    free = {p.path for p in objective.layout.params if not np.all(p.fixed)}
+    law, Simonot eq. 20: no data can separate them). A known value of either — one sample's
+    thickness in a series, one fixed α coefficient — breaks the trade-off α → kα, h → h/k: no
+    message then."""
+    free = {p.path for p in objective.layout.params if not np.any(p.fixed)}
     out = []
     for i, layer in enumerate(objective.stack.layers):
         refs = (i, layer.name) if layer.name else (i,)

@@ -185,7 +185,10 @@ class FitResult:
     Attributes:
         values: ``{name: coefficients}`` (shapes as the parameter: ``()``, ``(m,)``,
             ``(samples,)`` or ``(samples, m)``); ``stderr``: same shapes (NaN where not
-            identifiable); ``spectra``: ``{name: B c}`` on the model grid for spectral ones.
+            identifiable); ``spectra``: ``{name: B c}`` on the model grid for spectral ones, and
+            ``spectra_stderr``: their standard errors at every wavelength,
+            :math:`\sqrt{\operatorname{diag}(B C B^T)}` with C the covariance of the
+            coefficients (:func:`spectrum_stderr`).
         x, x_stderr, names: flat physical vector, its standard errors and component names.
         covariance, correlation: ``(P, P)``; ``covariance_scaled``: True if scaled by the
             reduced χ² (σ estimated from the residuals), False if from the given σ.
@@ -226,6 +229,7 @@ class FitResult:
     values: dict
     stderr: dict
     spectra: dict
+    spectra_stderr: dict
     covariance: np.ndarray
     correlation: np.ndarray
     covariance_scaled: bool
@@ -324,6 +328,10 @@ class FitResult:
                 lines.append(f"  {p.name:<24} {_fmt(float(v.ravel()[0]), float(e.ravel()[0])):<28} {kind}, bounds {bounds}{tag}")
             else:
                 what = "basis" if p.basis is not None and p.basis.shape[1] != p.basis.shape[0] else "values"
+                if p.name in self.spectra and v.size > REPORT_VALUES_MAX:
+                    lines.append(f"  {p.name:<24} {v.size} {what} ({kind}, bounds {bounds}): spectrum "
+                                 + self._spectrum_line(p.name, on_bound))
+                    continue
                 lines.append(f"  {p.name:<24} {v.size} {what} ({kind}, bounds {bounds}):")
                 for idx in np.ndindex(v.shape):
                     lab = "".join(f"[{i}]" for i, n in zip(idx, v.shape) if not (n == 1 and len(v.shape) > 1))
@@ -334,6 +342,8 @@ class FitResult:
                     if b is not None:
                         value += f"  AT {b['side'].upper()} BOUND {b['bound']:g}"
                     lines.append(f"      {lab:<12} {value}")
+                if p.name in self.spectra:
+                    lines.append(f"      {'spectrum':<12} {self._spectrum_line(p.name, on_bound)}")
         if self.at_bound:
             lines.append("  on a bound: " + "; ".join(f"{b['parameter']} = {b['value']:g} ({b['side']} bound {b['bound']:g})"
                                                      for b in self.at_bound))
@@ -348,6 +358,16 @@ class FitResult:
             rms = np.sqrt(np.nanmean(r ** 2, axis=-1))
             lines.append(f"  {ds.label}: rms per sample " + ", ".join(f"{v:.3g}" for v in rms))
         return "\n".join(lines)
+
+    def _spectrum_line(self, name: str, on_bound: dict) -> str:
+        """One line on a fitted spectrum: its range on the grid, its σ(λ) and bound contacts."""
+        y, e = np.asarray(self.spectra[name]), np.asarray(self.spectra_stderr[name])
+        finite = e[np.isfinite(e)]
+        sigma = (f"σ(λ) {np.min(finite):.3g} … {np.max(finite):.3g} (median {np.median(finite):.3g})"
+                 if finite.size else "σ(λ) not determined")
+        bound = sum(1 for k in on_bound if k.startswith(name + "["))
+        return (f"{np.nanmin(y):.4g} … {np.nanmax(y):.4g} on the grid, {sigma}"
+                + (f", {bound} values on a bound" if bound else "") + " — every value in the JSON and the plot")
 
     def __str__(self) -> str:
         return self.report()
@@ -385,7 +405,8 @@ class FitResult:
                     "stderr": clean(self.stderr[p.name]),
                     "lower": clean(p.lower),
                     "upper": clean(p.upper),
-                    **({"spectrum": clean(self.spectra[p.name])} if p.name in self.spectra else {}),
+                    **({"spectrum": clean(self.spectra[p.name]), "spectrum_stderr": clean(self.spectra_stderr[p.name])}
+                       if p.name in self.spectra else {}),
                 }
                 for p in obj.layout.params
             },
@@ -421,42 +442,30 @@ class FitResult:
 
     # ------------------------------------------------------------------- plot
     def plot(self, path=None, title: str = "", sample_names=None):
-        """Data (points) and fit (lines) per dataset with residuals below; returns the
-        matplotlib Figure (object API, Agg canvas) and writes a PNG when ``path`` is given.
-        ``sample_names``: legend names of the samples (e.g. the data file's column names); the
-        y axis says what the geometry reads (reflectance, reflectance factor, BRDF (1/sr) …)."""
+        """Data (points) and fit (lines) per dataset with residuals below, and each fitted
+        spectrum (α(λ), ρg(λ), …) with its ±1σ band, laid out as a grid of at most three panels
+        per row; returns the matplotlib Figure (object API, Agg canvas) and writes a PNG when
+        ``path`` is given. ``sample_names``: legend names of the samples (e.g. the data file's
+        column names); the y axis says what the geometry reads (reflectance, reflectance factor,
+        BRDF (1/sr) …)."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
         obj = self.objective
-        nd = len(obj.datasets)
-        fig = Figure(figsize=(7 * nd, 6), dpi=110, layout="constrained")
+        panels = len(obj.datasets) + len(self.spectra)
+        ncols = min(3, panels)
+        nrows = -(-panels // ncols)
+        fig = Figure(figsize=(6 * ncols, 5.2 * nrows), dpi=110, layout="constrained")
         FigureCanvasAgg(fig)
-        axes = fig.subplots(2, nd, sharex="col", squeeze=False, gridspec_kw={"height_ratios": [3, 1]})
-        wl = obj.wavelength
-        for k, ds in enumerate(obj.datasets):
-            top, bottom = axes[0, k], axes[1, k]
-            rows = obj.samples_of(k)
-            lab = ds.colour is not None
-            x = np.arange(3) if lab else wl
-            for s in range(rows):
-                color = f"C{s % 10}"
-                y = self.data[k][s]  # NaN at masked points
-                top.plot(x, y, "o" if lab else ".", ms=6 if lab else 3, color=color, alpha=0.6)
-                top.plot(x, self.model[k][s], "x" if lab else "-", ms=8, lw=1.4, color=color,
-                         label=(str(sample_names[s]) if sample_names is not None and len(sample_names) == rows
-                                else f"sample {s}") if rows > 1 else "fit")
-                bottom.plot(x, self.residuals[k][s], "o-" if lab else "-", lw=1.0, color=color)
-            top.set_title(ds.label, fontsize=10)
-            top.set_ylabel("CIELAB" if lab else ds.geometry.quantity_label)
-            if lab:
-                bottom.set_xticks([0, 1, 2], ["L*", "a*", "b*"])
-            top.grid(True, alpha=0.3)
-            top.legend(loc="best", frameon=False, fontsize=8)
-            bottom.axhline(0.0, color="k", lw=0.6)
-            bottom.set_xlabel("CIELAB coordinate" if lab else "wavelength (nm)")
-            bottom.set_ylabel("model − data")
-            bottom.grid(True, alpha=0.3)
+        cells = list(np.ravel(fig.subfigures(nrows, ncols, squeeze=False)))
+        for cell in cells[panels:]:
+            cell.set_visible(False)
+        names = (lambda s, rows: str(sample_names[s]) if sample_names is not None and len(sample_names) == rows
+                 else f"sample {s}")
+        for k, (ds, cell) in enumerate(zip(obj.datasets, cells)):
+            self._plot_dataset(cell, k, ds, names)
+        for (name, y), cell in zip(self.spectra.items(), cells[len(obj.datasets):]):
+            self._plot_spectrum(cell, name, np.asarray(y), np.asarray(self.spectra_stderr[name]), names)
         status = "converged" if self.converged else "NOT converged"
         quality = (f"χ²/ν {self.reduced_chi2:.3g} (ν = {self.dof})" if self.sigma_given
                    else f"no σ given: σ from residuals {self.sigma_estimate:.3g}")
@@ -468,6 +477,44 @@ class FitResult:
             fig.savefig(p)
         return fig
 
+    def _plot_dataset(self, cell, k: int, ds, names) -> None:
+        """Dataset ``k``: data and fit above, residuals below."""
+        top, bottom = cell.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+        rows = self.objective.samples_of(k)
+        lab = ds.colour is not None
+        x = np.arange(3) if lab else self.objective.wavelength
+        for s in range(rows):
+            color = f"C{s % 10}"
+            top.plot(x, self.data[k][s], "o" if lab else ".", ms=6 if lab else 3, color=color, alpha=0.6)  # NaN: masked
+            top.plot(x, self.model[k][s], "x" if lab else "-", ms=8, lw=1.4, color=color,
+                     label=names(s, rows) if rows > 1 else "fit")
+            bottom.plot(x, self.residuals[k][s], "o-" if lab else "-", lw=1.0, color=color)
+        top.set_title(ds.label, fontsize=10)
+        top.set_ylabel("CIELAB" if lab else ds.geometry.quantity_label)
+        if lab:
+            bottom.set_xticks([0, 1, 2], ["L*", "a*", "b*"])
+        top.grid(True, alpha=0.3)
+        top.legend(loc="best", frameon=False, fontsize=8)
+        bottom.axhline(0.0, color="k", lw=0.6)
+        bottom.set_xlabel("CIELAB coordinate" if lab else "wavelength (nm)")
+        bottom.set_ylabel("model − data")
+        bottom.grid(True, alpha=0.3)
+
+    def _plot_spectrum(self, cell, name: str, y, e, names) -> None:
+        """A fitted spectrum on the model grid with its ±1σ band (one curve per sample)."""
+        ax = cell.subplots()
+        wl = self.objective.wavelength
+        y2, e2 = np.atleast_2d(y), np.atleast_2d(e)
+        for s, (ys, es) in enumerate(zip(y2, e2)):
+            color = f"C{s % 10}"
+            ax.plot(wl, ys, lw=1.4, color=color, label=names(s, len(y2)) if len(y2) > 1 else "fitted")
+            ax.fill_between(wl, ys - es, ys + es, color=color, alpha=0.25, lw=0, label="±1σ" if s == 0 else None)
+        ax.set_title(f"{name} (±1σ band)", fontsize=10)
+        ax.set_xlabel("wavelength (nm)")
+        kind = name.split("[")[0]
+        ax.set_ylabel(f"{kind} ({_UNITS[kind]})" if kind in _UNITS else kind)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", frameon=False, fontsize=8)
 
 
 def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.ndarray]:
@@ -572,6 +619,36 @@ def identifiability_lines(non_identifiable: list, findings: list, pairs: list,
     return lines
 
 
+def spectrum_stderr(layout, covariance: np.ndarray) -> dict:
+    r"""Standard errors of the spectra of the spectral parameters on the model grid,
+    ``{name: (wl,) or (samples, wl)}``: the spectrum is :math:`B c` (basis ``B`` ``(wl, m)``,
+    coefficients ``c``), so its variance at each wavelength is :math:`\operatorname{diag}(B C B^T)`
+    with ``C`` the covariance block of ``c`` (fixed coefficients: 0; per sample: each sample's own block)."""
+    position = {int(j): k for k, j in enumerate(layout.free_index)}
+    out = {}
+    for p, a, b in zip(layout.params, layout.offsets[:-1], layout.offsets[1:]):
+        if p.basis is None:
+            continue
+        local = [t for t in range(b - a) if a + t in position]
+        glob = [position[a + t] for t in local]
+        C = np.zeros((b - a, b - a))
+        C[np.ix_(local, local)] = covariance[np.ix_(glob, glob)]
+        m = p.basis.shape[1]
+        rows = (b - a) // m  # samples (1 for a shared spectrum)
+        blocks = C.reshape(rows, m, rows, m)[np.arange(rows), :, np.arange(rows), :]  # (rows, m, m)
+        var = np.einsum("lm,smn,ln->sl", p.basis, blocks, p.basis)
+        out[p.name] = np.sqrt(np.maximum(var, 0.0)).reshape(p.x0.shape[:-1] + (p.basis.shape[0],))
+    return out
+
+
+#: Units of the spectral parameters' values, for plot labels.
+_UNITS = {"alpha": "1/nm", "k": "dimensionless", "n": "dimensionless", "rho_g": "dimensionless"}
+
+#: A spectral parameter with more values than this is summarised in the report (every value is in
+#: the JSON and the plot).
+REPORT_VALUES_MAX = 12
+
+
 def _plain_residuals(objective: Objective, model, data) -> list:
     """Unweighted residuals of every dataset, :meth:`~fitting.Objective.residual_of` (``model − data``;
     Δ wrapped for an ellipsometer), as NumPy arrays: one compiled call, compiled once per objective
@@ -608,6 +685,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     values = layout.values(x)
     stderr = layout.values(err, fill=np.nan)
     spectra = {p.name: p.spectrum(c) for p, c in zip(layout.params, layout.split(x)) if p.basis is not None}
+    spectra_stderr = spectrum_stderr(layout, np.asarray(stats.covariance))
     masks = _mask(objective)
     data = [np.asarray(d) for d in args[0]]
     # the geometry's own residual (Δ wrapped into (−180°, 180°]), as in the fit itself
@@ -635,7 +713,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
         warnings.append(separability_warning(findings, separated, correlation_limit))
     return FitResult(
         objective=objective, method=options.method, x=x, x_stderr=err, names=list(layout.names), values=values,
-        stderr=stderr, spectra=spectra, covariance=np.asarray(stats.covariance), correlation=np.asarray(stats.correlation),
+        stderr=stderr, spectra=spectra, spectra_stderr=spectra_stderr, covariance=np.asarray(stats.covariance), correlation=np.asarray(stats.correlation),
         covariance_scaled=stats.sigma_origin not in (SIGMA_GIVEN, SIGMA_DEFAULT), chi2=chi2,
         reduced_chi2=red, dof=dof, n_points=int(stats.n_points), cost=cost, model=model, data=data,
         residuals=residuals, num_steps=int(out.num_steps), converged=converged, reason=result_message(code),

@@ -1,10 +1,11 @@
 r"""Many independent fits at once, and the joint calibration-series fit.
 
 :func:`fit_batch` fits N independent data sets with the same :class:`~fitting.Objective`
-(same model, parameters and starting values; only the data differ) in one compiled, vmapped
-solve, N processed in chunks of ``chunk_size`` (bounded memory; the last chunk is padded so
-that one compiled shape serves all). Every fit keeps its own convergence status: a failed fit
-does not fail the batch.
+(same model, parameters and starting values; only the data differ) in one compiled solve
+(each fit by the single fit's program, :data:`fitting._solve.BLOCK`), N processed in chunks of
+``chunk_size`` (bounded memory; the last chunk is padded so that one compiled shape serves
+all). Every fit keeps its own convergence status: a failed fit does not fail the batch, and a
+batch that cannot finish says so (:func:`fitting._watchdog.wait_for`) instead of waiting.
 
 :func:`calibration_series` builds the joint objective of a calibration series: several samples
 of the same varnish or ink at different thicknesses over the same background share α(λ) and
@@ -36,6 +37,7 @@ from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_c
                      require_compiled_method, settle_on_bounds, starting_point)
 from ._statistics import SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, bound_contacts, fit_statistics
 from ._status import CONVERGED, INVALID_DATA, result_message
+from ._watchdog import STALL_S, wait_for
 
 __all__ = ["BatchResult", "fit_batch", "calibration_series", "background_rho_g"]
 
@@ -222,8 +224,9 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
               rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, sigma_tol: float = 1e-3,
               scale_covariance: Optional[bool] = None,
               rank_rtol: float = 1e-8, full_results: bool = False, start: str = "objective",
-              lookup_size: int = 256) -> BatchResult:
-    """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
+              lookup_size: int = 256, timeout_s: Optional[float] = None,
+              stall_s: Optional[float] = STALL_S) -> BatchResult:
+    """N independent fits of ``objective`` to N data sets, in one compiled solve.
 
     Args:
         objective: the model; its own data are not used, its σ / weights and masks are.
@@ -241,6 +244,11 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             each fit starts from the nearest of ``lookup_size`` precomputed model spectra over
             the parameter box (:class:`LookupTable`): fewer solver steps for data spread over a
             wide box, at the cost of ``lookup_size`` forward spectra computed once.
+        timeout_s: wall-clock limit of the batch in seconds (None: none): past it,
+            :class:`~layerstack_jax.LayerstackError` says how many chunks were done.
+        stall_s: a chunk solved on the CPU whose process has used no CPU time for this many
+            seconds is stuck, not slow: :class:`~layerstack_jax.LayerstackError` says so
+            (:func:`fitting._watchdog.wait_for`; None: wait as long as it takes).
 
     A fit whose data fail the objective's checks (NaN, a negative reflectance …) is not made:
     it is flagged in its own row (status ``INVALID_DATA``, NaN values, the reason in
@@ -277,6 +285,10 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)
     report = reporter(progress, n, desc="fit_batch", unit="fit", auto=n_chunks > 1)
+    for name, v in (("timeout_s", timeout_s), ("stall_s", stall_s)):
+        if v is not None and not (isinstance(v, (int, float)) and v > 0):
+            raise LayerstackError(f"{name} must be > 0 seconds or None, got {v!r}")
+    deadline = None if timeout_s is None else start_time + timeout_s
     outs = []
     for c in range(n_chunks):
         sl = slice(c * chunk, (c + 1) * chunk)
@@ -284,7 +296,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         if table is not None:
             y0 = jnp.asarray(starting_point(objective, o, table.nearest(*part)))
         out = fn(y0, part, objective.optics)
-        outs.append(jax.tree.map(np.asarray, out))
+        outs.append(wait_for(out, what=f"fit_batch: chunk {c + 1} of {n_chunks} ({chunk} fits)", stall_s=stall_s,
+                             deadline=deadline, hint=f"{c} of {n_chunks} chunks were done"))
         if report is not None:
             report(min((c + 1) * chunk, n))
     out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)

@@ -1,16 +1,19 @@
 r"""Many independent fits at once, and the joint calibration-series fit.
 
 :func:`fit_batch` fits N independent data sets with the same :class:`~fitting.Objective`
-(same model, parameters and starting values; only the data differ) in one compiled, vmapped
-solve, N processed in chunks of ``chunk_size`` (bounded memory; the last chunk is padded so
-that one compiled shape serves all). Every fit keeps its own convergence status: a failed fit
-does not fail the batch.
+(same model, parameters and starting values; only the data differ) in one compiled solve
+(each fit by the single fit's program, :data:`fitting._solve.BLOCK`), N processed in chunks of
+``chunk_size`` (bounded memory; the last chunk is padded so that one compiled shape serves
+all). Every fit keeps its own convergence status: a failed fit does not fail the batch, and a
+batch that cannot finish says so (:func:`fitting._watchdog.wait_for`) instead of waiting.
 
 :func:`calibration_series` builds the joint objective of a calibration series: several samples
-of the same varnish or ink at different thicknesses over the same background share α(λ) and
-ρg(λ) (each on a B-spline basis), each has its own thickness; ρg starts from — or is fixed
-to — the inversion of a bare-background measurement, :func:`layerstack_jax.invert_background`
-(Simonot et al. eqs. 86–87). With ρg free, that bare-background spectrum is also fitted, as a
+of the same varnish, ink or sheet at different thicknesses share α(λ) (on a B-spline basis or
+free at every wavelength), each has its own thickness, some known; over a Lambertian
+background they also share ρg(λ), which starts from — or is fixed to — the inversion of a
+bare-background measurement, :func:`layerstack_jax.invert_background` (Simonot et al. eqs.
+86–87). The exit may also be a specular substrate or the ambient (a free-standing sheet), and
+the samples may be measured in several geometries at once (reflectance and transmittance). With ρg free, that bare-background spectrum is also fitted, as a
 dataset of its own (``Dataset(bare=True)``: the stack without its layers), so the joint fit
 sees both the coated samples and the uncoated background.
 """
@@ -37,6 +40,7 @@ from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_c
 from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
                           fit_statistics, separability_summary)
 from ._status import CONVERGED, INVALID_DATA, result_message
+from ._watchdog import STALL_S, wait_for
 
 __all__ = ["BatchResult", "fit_batch", "calibration_series", "background_rho_g"]
 
@@ -229,8 +233,9 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
               rtol: float = 1e-10, atol: float = 1e-12, gtol: float = 1e-9, sigma_tol: float = 1e-3,
               scale_covariance: Optional[bool] = None,
               rank_rtol: float = 1e-8, full_results: bool = False, start: str = "objective",
-              lookup_size: int = 256, structure: str = "auto") -> BatchResult:
-    """N independent fits of ``objective`` to N data sets, in one compiled vmapped solve.
+              lookup_size: int = 256, structure: str = "auto", timeout_s: Optional[float] = None,
+              stall_s: Optional[float] = STALL_S) -> BatchResult:
+    """N independent fits of ``objective`` to N data sets, in one compiled solve.
 
     Args:
         objective: the model; its own data are not used, its σ / weights and masks are.
@@ -248,6 +253,11 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             each fit starts from the nearest of ``lookup_size`` precomputed model spectra over
             the parameter box (:class:`LookupTable`): fewer solver steps for data spread over a
             wide box, at the cost of ``lookup_size`` forward spectra computed once.
+        timeout_s: wall-clock limit of the batch in seconds (None: none): past it,
+            :class:`~layerstack_jax.LayerstackError` says how many chunks were done.
+        stall_s: a chunk solved on the CPU whose process has used no CPU time for this many
+            seconds is stuck, not slow: :class:`~layerstack_jax.LayerstackError` says so
+            (:func:`fitting._watchdog.wait_for`; None: wait as long as it takes).
 
     A fit whose data fail the objective's checks (NaN, a negative reflectance …) is not made:
     it is flagged in its own row (status ``INVALID_DATA``, NaN values, the reason in
@@ -284,6 +294,10 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)
     report = reporter(progress, n, desc="fit_batch", unit="fit", auto=n_chunks > 1)
+    for name, v in (("timeout_s", timeout_s), ("stall_s", stall_s)):
+        if v is not None and not (isinstance(v, (int, float)) and v > 0):
+            raise LayerstackError(f"{name} must be > 0 seconds or None, got {v!r}")
+    deadline = None if timeout_s is None else start_time + timeout_s
     outs = []
     for c in range(n_chunks):
         sl = slice(c * chunk, (c + 1) * chunk)
@@ -291,7 +305,8 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
         if table is not None:
             y0 = jnp.asarray(starting_point(objective, o, table.nearest(*part)))
         out = fn(y0, part, objective.optics)
-        outs.append(jax.tree.map(np.asarray, out))
+        outs.append(wait_for(out, what=f"fit_batch: chunk {c + 1} of {n_chunks} ({chunk} fits)", stall_s=stall_s,
+                             deadline=deadline, hint=f"{c} of {n_chunks} chunks were done"))
         if report is not None:
             report(min((c + 1) * chunk, n))
     out = jax.tree.map(lambda *a: np.concatenate(a)[:n], *outs)
@@ -373,30 +388,55 @@ def background_rho_g(wavelength_nm, measured, geometry: Geometry, n_g: float = 1
     return np.clip(rho, 0.0, 1.0)
 
 
-def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry, *, layer=0, thicknesses=None,
-                       alpha_basis=20, rho_g_basis: Optional[int] = 20, background=None, background_geometry=None,
+#: ``rho_g_basis`` by default: 20 B-spline functions over a Lambertian background, no ρg otherwise.
+_AUTO = "auto"
+
+
+def _per_dataset(what: str, value, n: int, several: bool) -> list:
+    """``value`` as one entry per dataset: given per dataset (a list or tuple of ``n``) when
+    there are ``several``, else the one value."""
+    if not several:
+        return [value]
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise LayerstackError(f"calibration_series: with {n} geometries give {what} as a list of {n} (one per "
+                              f"geometry), got {type(value).__name__}")
+    return list(value)
+
+
+def calibration_series(stack: Stack, wavelength_nm, spectra, geometry, *, layer=0, thicknesses=None,
+                       alpha_basis=20, rho_g_basis=_AUTO, background=None, background_geometry=None,
                        known=(0,), sigma=None, alpha_smoothness: float = 0.0, fit_background: bool = True,
-                       background_sigma=None, nodes: Optional[int] = None) -> Objective:
-    """Joint objective of a calibration series (see the module docstring).
+                       background_sigma=None, nodes: Optional[int] = None, parameters=()) -> Objective:
+    """Joint objective of a calibration series (see the module docstring): samples of one layer
+    at several thicknesses share its α(λ) (and ρg(λ) over a Lambertian background), each sample
+    has its own thickness, some of them known.
 
     Args:
-        stack: template stack: the layer (``layer``, position or name) over a
-            :class:`~layerstack_jax.LambertianBackground`; its α and ρg are starting values.
+        stack: template stack: the layer (``layer``, position or name) over any exit — a
+            :class:`~layerstack_jax.LambertianBackground`, a specular substrate, or the ambient
+            again for a free-standing sheet (``Substrate(1.0)`` in air); its α (and ρg) are
+            starting values.
         wavelength_nm: model grid (nm) on which ``spectra`` (and ``background``) are given.
-        spectra: ``(samples, wl)`` measured spectra of the coated samples.
-        geometry: their measurement geometry.
-        thicknesses: ``(samples,)`` starting thicknesses in nm (default: the stack's).
+        spectra: ``(samples, wl)`` measured spectra of the samples — or, with several
+            geometries, one such array per geometry (the same samples measured in each: e.g.
+            their reflectance and their transmittance, fitted together).
+        geometry: their measurement geometry, or a list of geometries (one per array of
+            ``spectra``), e.g. ``[Specular(8, "R"), Specular(0, "T")]``.
+        thicknesses: ``(samples,)`` starting thicknesses in nm (default: the stack's); those of
+            the ``known`` samples are kept.
         known: samples whose thickness is known (kept at its value in ``thicknesses``). At
             least one is needed: an incoherent layer's spectra depend on α and h only through
             α·h (Beer, Simonot eq. 61), so without a known thickness only α·h of each sample
             is determined (the fit then reports that combination as non-identifiable).
         alpha_basis: B-spline functions for α(λ) (int), ``"free"``, or a matrix.
-        rho_g_basis: B-spline functions for ρg(λ), or None to keep ρg fixed (to the inverted
-            background when ``background`` is given, else to the stack's).
-        background: optional ``(wl,)`` measurement of the bare background: ρg from
+        rho_g_basis: over a Lambertian background: B-spline functions for ρg(λ),
+            ``"free"``, a matrix, or None to keep ρg fixed (to the inverted background when
+            ``background`` is given, else to the stack's); default 20. Other exits have no ρg
+            (leave the default).
+        background: optional ``(wl,)`` measurement of the bare Lambertian background: ρg from
             :func:`background_rho_g` becomes the start (or the fixed value) of ρg.
-        background_geometry: geometry of that measurement (default: ``geometry``).
-        sigma: σ of the spectra (scalar or ``(samples, wl)``), or None.
+        background_geometry: geometry of that measurement (default: ``geometry``, the first one).
+        sigma: σ of the spectra (scalar or ``(samples, wl)``; one per geometry with several), or None.
         fit_background: when ρg is free and ``background`` is given, also fit the bare-background
             spectrum (a :class:`~fitting.Dataset` with ``bare=True``): it pins ρg(λ) where the
             coated samples are dark and ρg would otherwise trade off against α(λ).
@@ -404,38 +444,59 @@ def calibration_series(stack: Stack, wavelength_nm, spectra, geometry: Geometry,
             when that is a scalar).
         nodes: quadrature nodes per segment of the diffuse integrals (default
             :data:`layerstack_jax.DEFAULT_NODES`), for the fit and the ρg inversion.
+        parameters: further :class:`~fitting.Parameter` objects fitted with the series, shared
+            by the samples unless per sample (e.g. ``fitting.index_n("sheet")``: one n).
     """
-    if not stack.exit.diffuse:
-        raise LayerstackError("calibration_series: the stack must lie over a LambertianBackground")
-    y = np.asarray(spectra, dtype=float)
-    if y.ndim != 2:
-        raise LayerstackError(f"calibration_series: spectra must be (samples, wl), got shape {y.shape}")
+    lambertian = stack.exit.diffuse
+    if isinstance(rho_g_basis, str) and rho_g_basis == _AUTO:
+        rho_g_basis = 20 if lambertian else None
+    if not lambertian and (rho_g_basis is not None or background is not None):
+        raise LayerstackError("calibration_series: rho_g and a bare-background measurement belong to a "
+                              "LambertianBackground exit; this stack's exit is a specular substrate (or the ambient)")
+    several = isinstance(geometry, (list, tuple))
+    geometries = list(geometry) if several else [geometry]
+    if not geometries:
+        raise LayerstackError("calibration_series: no geometry given")
+    ys = [np.asarray(y, dtype=float) for y in _per_dataset("spectra", spectra, len(geometries), several)]
+    sigmas = _per_dataset("sigma", sigma, len(geometries), several and isinstance(sigma, (list, tuple)))
+    sigmas = sigmas * len(geometries) if len(sigmas) == 1 else sigmas
+    for y in ys:
+        if y.ndim != 2:
+            raise LayerstackError(f"calibration_series: spectra must be (samples, wl), got shape {y.shape}")
+    if len({y.shape for y in ys}) != 1:
+        raise LayerstackError("calibration_series: the spectra of each geometry must hold the same samples on the "
+                              f"same grid, got shapes {[y.shape for y in ys]}")
+    n_samples = ys[0].shape[0]
     wl = np.asarray(wavelength_nm, dtype=float)
     rho = None
     if background is not None:
         n_g = np.real(np.asarray(stack.exit.index(wl)))
         if np.ndim(n_g):
             raise LayerstackError("calibration_series: the background index must be a constant to invert ρg")
-        rho = background_rho_g(wl, background, background_geometry or geometry, float(n_g),
+        rho = background_rho_g(wl, background, background_geometry or geometries[0], float(n_g),
                                float(np.real(np.asarray(stack.ambient(wl)))), nodes=nodes)
         stack = dataclasses.replace(stack, exit=LambertianBackground(stack.exit.index, rho))
-    fixed = np.zeros(y.shape[0], bool)
+    fixed = np.zeros(n_samples, bool)
     for s in known:
-        if not -y.shape[0] <= int(s) < y.shape[0]:
-            raise LayerstackError(f"calibration_series: known sample {s} does not exist ({y.shape[0]} samples)")
+        if not -n_samples <= int(s) < n_samples:
+            raise LayerstackError(f"calibration_series: known sample {s} does not exist ({n_samples} samples)")
         fixed[int(s)] = True
     params = [thickness_parameter(layer, value=thicknesses, per_sample=True, fixed=fixed)]
     params.append(alpha_parameter(layer, basis=alpha_basis, smoothness=alpha_smoothness))
     if rho_g_basis is not None:
         params.append(rho_g_parameter(basis=rho_g_basis))
-    datasets = [Dataset(geometry, y, sigma=sigma, name="calibration series")]
+    params.extend(parameters)
+    name = "calibration series"
+    datasets = [Dataset(g, y, sigma=sg, name=name if len(geometries) == 1 else f"{name}: {g.label}")
+                for g, y, sg in zip(geometries, ys, sigmas)]
     if background is not None and rho_g_basis is not None and fit_background:
+        sigma = sigmas[0]
         if background_sigma is None and sigma is not None and np.ndim(sigma) > 0:
             raise LayerstackError("calibration_series: give background_sigma (sigma is per point)")
         s_bg = sigma if background_sigma is None else background_sigma
         if (s_bg is None) != (sigma is None):
             raise LayerstackError("calibration_series: give sigma for both the spectra and the background, or neither")
-        datasets.append(Dataset(background_geometry or geometry, np.asarray(background, float), sigma=s_bg,
+        datasets.append(Dataset(background_geometry or geometries[0], np.asarray(background, float), sigma=s_bg,
                                 name="bare background", bare=True))
     kw = {} if nodes is None else {"nodes": nodes}
-    return Objective(stack, wl, datasets, params, n_samples=y.shape[0], **kw)
+    return Objective(stack, wl, datasets, params, n_samples=n_samples, **kw)

@@ -293,7 +293,10 @@ def parameters_from_declarations(declarations: Sequence[FreeDeclaration], source
     """
     params = [
         Parameter(path=tuple(d.path), kind=d.kind, name=d.name, lower=d.lower, upper=d.upper, basis=d.basis,
-                  per_sample=d.per_sample, smoothness=d.smoothness)
+                  per_sample=d.per_sample, smoothness=d.smoothness,
+                  # a per-sample number written as a list: each sample's start, the known ones fixed
+                  value=None if d.values is None else np.asarray(d.values, float),
+                  fixed=None if d.known is None else np.asarray(d.known, bool))
         for d in declarations
     ]
     if not params:

@@ -63,6 +63,7 @@ from ._statistics import bound_contacts
 from ._structured import (STRUCTURE_MODES, CompressedJacobian, StructuredDampedNewtonDescent, block_distance,
                           compressed_jacobian_function, sparse_jacobian_function, structure_for,
                           structured_jacobian_with_statistics, structured_statistics_function)
+from ._watchdog import wait_for
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
 __all__ = ["SolverOptions", "METHODS", "HOST_METHODS", "STATUS", "FitOutput", "LevenbergMarquardt",
@@ -586,16 +587,24 @@ class fit_jit:
         return getattr(top, name)
 
 
-#: Fits per vmapped block inside a batched solve (``jax.lax.map``): small blocks keep the
-#: working set in cache and let each block stop as soon as its own fits have converged.
-BLOCK = 4
+#: Fits per vmapped block inside a batched solve (``jax.lax.map`` over blocks). 1: on a single
+#: device each fit is solved by the single fit's own program, one fit after the other, so no
+#: LAPACK call in it carries a batch axis. A least-squares step holds two LAPACK calls that do not
+#: depend on each other (the QR of the damped Gauss–Newton system, the eigenvalues of
+#: :func:`near_minimum`'s stopping test), which XLA runs at the same time; vmapped, each becomes
+#: a batched call, and jaxlib's CPU LAPACK kernels of the 0.10 series split a batch over XLA's
+#: intra-op thread pool and block their pool thread until the parts are done. With as many such
+#: calls at once as the pool has threads (two on a 2-core machine) no thread is left to run the
+#: parts: the solve waited forever at 0 % CPU. Fit by fit, each fit also stops at its own
+#: convergence (a vmapped block runs until its slowest fit ends).
+BLOCK = 1
 
 
 def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: int = BLOCK):
     """The jitted ``(start, args, optics) -> FitOutput`` of ``objective`` for options ``o`` —
     solve, then the statistics' ingredients at the solution, in one compiled function. When
     ``batched``, start and args carry a leading axis of fits, solved ``block`` at a time
-    (vmapped) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
+    (vmapped when ``block`` > 1, see :data:`BLOCK`) by ``jax.lax.map``; ``optics`` (the objective's fixed optics,
     :attr:`Objective.optics`) is shared. Where JAX sees several devices (accelerators, or CPU
     devices made by ``XLA_FLAGS=--xla_force_host_platform_device_count``), each block's fits are
     split over them (sharding of the fits' axis; the block is padded to a multiple of the device
@@ -622,6 +631,8 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
             def run_all(starts, args, optics, give_up):
                 n = starts.shape[0]
                 b = -(-min(block, n) // k) * k  # a multiple of the device count
+                if b == 1:  # one device: fit by fit, each by the single fit's program (BLOCK)
+                    return jax.lax.map(lambda sa: run(sa[0], sa[1], optics, give_up), (starts, args))
                 pad = -n % b
                 nb = (n + pad) // b
                 blocks = jax.tree.map(  # (n_blocks, b, ...): the last block padded with copies of fit 0
@@ -806,7 +817,8 @@ def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -
         new = jax.tree.map(lambda *a: np.stack([np.asarray(v) for v in a]), *new)
     else:
         start, args = jnp.asarray(start), jax.tree.map(jnp.asarray, args)
-        new = jax.tree.map(np.asarray, compiled_fit(objective, o, batched=True)(start, args, objective.optics))
+        new = wait_for(compiled_fit(objective, o, batched=True)(start, args, objective.optics),
+                       what=f"{len(rows)} fit(s) solved again from a bound ({o.method})")
     return new._replace(num_steps=new.num_steps + np.asarray(out.num_steps)[rows])
 
 

@@ -296,6 +296,46 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
     return 0 if result.converged else 1
 
 
+def _quantity_from_columns(text: str, names: list, source: str):
+    """``(Geometry, origin)`` for a ``-g`` spelling that leaves the quantity open (``specular:θ``
+    reads R, T or A: its ``prediction_columns`` are several): the quantity that every data
+    column's name states (``R_…``, ``T sheet 1``, ``transmittance …``), never a default — a
+    :class:`LayerstackError` when the names do not say or disagree."""
+    import re
+
+    from layerstack_jax import parse_geometry
+
+    options = parse_geometry(text).prediction_columns(text)  # [("R_0", Specular(0, "R")), ("T_0", ...), ...]
+    tokens = {col.split("_")[0].upper(): g for col, g in options}
+
+    def stated(name: str):
+        token = re.split(r"[_\s:()\-]", name.strip(), maxsplit=1)[0].upper()
+        if token in tokens:
+            return token
+        return next((t for t, g in tokens.items() if name.strip().lower().startswith(g.quantity_label)), None)
+
+    found = {stated(n) for n in names}
+    if len(found) == 1 and None not in found:
+        g = tokens[found.pop()]
+        return g, f"-g {text}, {g.quantity_label} from the data's column names"
+    quantities = ", ".join(f"{t} ({g.quantity_label})" for t, g in tokens.items())
+    why = ("the column names name several of them" if len(found - {None}) > 1
+           else "the column names do not say (name them e.g. " + ", ".join(f"{t}_1" for t in tokens) + ")")
+    raise LayerstackError(f"{source}: -g {text} does not say which quantity the spectra are: {quantities}; {why}; "
+                          f"give it in the geometry, e.g. -g {text}:{next(iter(tokens))}")
+
+
+def _check_per_sample_values(params, names: list, source: str) -> None:
+    """Per-sample values written in the stack file (``value = [...]``) must number the spectra
+    of a joint fit."""
+    for p in params:
+        v = None if p.value is None else np.asarray(p.value)
+        if p.per_sample and v is not None and v.ndim == 1 and v.size != len(names):
+            raise LayerstackError(f"{source}: {p.name} has {v.size} per-sample values but the joint fit has "
+                                  f"{len(names)} spectra ({', '.join(names)}): give one value per spectrum, in the "
+                                  "columns' order")
+
+
 def _read_spectra(path):
     """``(wavelength_nm, columns)`` when ``path`` is a spectra CSV (header ``wavelength_nm``, then
     one column per spectrum; a missing value is NaN), else None (an instrument file or a
@@ -361,6 +401,9 @@ def _cmd_fit(args) -> int:
     geometry, geometry_origin = _resolve_geometry(args.geometry, [n for n in columns if n != args.background],
                                                   source=args.data, origin="from the data's column names",
                                                   silent="the column names do not say")
+    if args.geometry is not None and len(geometry.prediction_columns(args.geometry.strip())) > 1:
+        geometry, geometry_origin = _quantity_from_columns(args.geometry.strip(),
+                                                           [n for n in columns if n != args.background], args.data)
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
     geometry = instrument_geometry(geometry, load_instrument(args.stack))
     with _precision(args.float32):
@@ -405,6 +448,7 @@ def _cmd_fit(args) -> int:
 
         results, skipped = [], []
         if args.joint:
+            _check_per_sample_values(params, names, args.stack)
             obj = objective(Y, used)
             results.append(("+".join(names), fitting.fit(obj, args.method, starts=args.starts, max_steps=args.max_steps)))
         else:

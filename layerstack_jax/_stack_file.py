@@ -24,7 +24,7 @@ from ._spectra_csv import read_csv_columns
 from ._kubelka_munk import KubelkaMunk, Mixture, Paint
 from ._leaves import file_fields
 from ._stack import LambertianBackground, Layer, Stack, Substrate, TabulatedSpectrum
-from ._validate import LayerstackError, is_concrete
+from ._validate import LayerstackError, LayerstackWarning, is_concrete
 
 __all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
            "load_fit_stack", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
@@ -256,6 +256,31 @@ def _database_material(where: FileLocation, spec: Mapping, k_given: bool, allow_
     return m
 
 
+#: A negative entry of a table that must be >= 0 (α, ρg, the k column of an index table) no
+#: larger in magnitude than this fraction of the table's largest value is rounding or baseline
+#: noise of a measured table (an α from −ln T / h, T known to 1e-3, dips a few 1e-9 /nm below
+#: zero where the sheet is clear, against 1e-5–1e-4 /nm where it absorbs): it is clipped to 0,
+#: with a :class:`LayerstackWarning` naming the table and column; a larger one is refused.
+NEGATIVE_RTOL = 1e-3
+
+
+def _clip_rounding_negatives(where: FileLocation, key: str, values: np.ndarray, what: str) -> np.ndarray:
+    """``values`` with negatives within :data:`NEGATIVE_RTOL` of the largest value set to 0
+    (warned about); larger negatives are left for :func:`check_range` to refuse."""
+    low = values < 0
+    if not np.any(low):
+        return values
+    top = float(np.max(np.abs(values)))
+    if float(np.min(values)) < -NEGATIVE_RTOL * top or top == 0:
+        return values
+    import warnings
+
+    warnings.warn(f"{where.source}: {where.table}: key {key!r}: {what}: {int(low.sum())} negative value(s) down to "
+                  f"{float(np.min(values)):.3g} (within {NEGATIVE_RTOL:g} of the largest value, {top:.3g}: rounding "
+                  "or baseline noise) set to 0", LayerstackWarning, stacklevel=3)
+    return np.where(low, 0.0, values)
+
+
 def _tabulated(where, wl, n, k_col, k_given, k, allow_k, name, file=None) -> Tabulated:
     what = f"table {file!r}" if file else "inline table"
     check_grid(where, "n", wl, what)
@@ -266,6 +291,7 @@ def _tabulated(where, wl, n, k_col, k_given, k, allow_k, name, file=None) -> Tab
     if k_col is not None:
         if k_given:
             raise where.error(f"k is given both as a key and as a column of the {what}; keep one", "k")
+        k_col = _clip_rounding_negatives(where, "n", k_col, f"{what}: column k")
         check_range(where, "n", k_col, f"{what}: column k", lo=0.0)
         if not allow_k and np.any(k_col != 0):
             raise where.error(f"{what}: this medium must be transparent (k = 0)", "n")
@@ -297,11 +323,13 @@ def _spectrum(where: FileLocation, key: str, spec, base_dir: Path, column: str, 
         if values.shape != wl.shape:
             raise where.error(f"{what}: {values.size} values for {wl.size} wavelengths", key)
     check_grid(where, key, wl, what)
+    if lo == 0.0:
+        values = _clip_rounding_negatives(where, key, values, f"{what}: column {column}")
     check_range(where, key, values, what, lo=lo, hi=hi)
     return TabulatedSpectrum(wl, values, name=name)
 
 
-FREE_KEYS = ("value", "free", "min", "max", "basis", "per_sample", "smoothness")
+FREE_KEYS = ("value", "free", "min", "max", "basis", "per_sample", "known", "smoothness")
 
 
 class FreeDeclaration(NamedTuple):
@@ -324,6 +352,10 @@ class FreeDeclaration(NamedTuple):
         per_sample: one value per spectrum in a joint fit.
         smoothness: weight of the smoothness penalty of a spectrum (≥ 0).
         where: ``"<file>: <table>"`` for messages.
+        values: a per-sample number written as a list (``value = [115000, 480000]``): the
+            starting value of each sample, in the file's unit (None: the one value for all).
+        known: with ``values``, ``known = [true, false]``: the samples whose value is known
+            (kept at it, not fitted); None: none.
     """
 
     path: tuple
@@ -335,6 +367,34 @@ class FreeDeclaration(NamedTuple):
     per_sample: bool
     smoothness: float
     where: str
+    values: Optional[tuple] = None
+    known: Optional[tuple] = None
+
+
+def _per_sample_values(where: FileLocation, key: str, decl: dict, values) -> tuple:
+    """``(values, known)`` of a per-sample number written as a list (``value = [a, b, ...]``,
+    optional ``known = [true, false, ...]``), checked; ``values`` None for a single number."""
+    known = decl.get("known")
+    if values is None:
+        if known is not None:
+            raise where.error("known = [...] marks samples of a per-sample value: write value = [one number per "
+                              "sample] with the known samples' values", key)
+        return None, None
+    if not decl.get("per_sample", False):
+        raise where.error(f"value = [...] gives one value per sample: add per_sample = true (got {values!r})", key)
+    if not values or not all(is_number(v) and math.isfinite(float(v)) for v in values):
+        raise where.error(f"value must be a number, or a list of numbers (one per sample), got {values!r}", key)
+    values = tuple(float(v) for v in values)
+    if known is None:
+        return values, None
+    if not (isinstance(known, list) and all(isinstance(k, bool) for k in known)):
+        raise where.error(f"known must be a list of true/false, one per sample, got {known!r}", key)
+    if len(known) != len(values):
+        raise where.error(f"known has {len(known)} entries for {len(values)} values (one per sample)", key)
+    if all(known):
+        raise where.error("every sample's value is known: nothing is left to fit (drop free, or mark a sample false)",
+                          key)
+    return values, tuple(known)
 
 
 def _split_free(where: FileLocation, key: str, spec, path: tuple, kind: str, free: Optional[list], *, spectral: bool):
@@ -348,8 +408,9 @@ def _split_free(where: FileLocation, key: str, spec, path: tuple, kind: str, fre
         if rest:
             raise where.error(f"give either value = ... or {', '.join(rest)}, not both", key)
         plain = decl.pop("value")
-        if not is_number(plain):
-            raise where.error(f"value must be a number, got {plain!r}", key)
+        listed = isinstance(plain, list) and not spectral
+        if not (is_number(plain) or listed):
+            raise where.error(f"value must be a number{'' if spectral else ', or a list of numbers (one per sample, with per_sample = true)'}, got {plain!r}", key)
     elif rest and spectral:
         plain = rest
     else:
@@ -378,14 +439,19 @@ def _split_free(where: FileLocation, key: str, spec, path: tuple, kind: str, fre
     smooth = decl.get("smoothness", 0.0)
     if not is_number(smooth) or smooth < 0:
         raise where.error(f"smoothness must be a number >= 0, got {smooth!r}", key)
-    extra = [k for k in ("min", "max", "basis", "per_sample", "smoothness") if k in decl]
+    extra = [k for k in ("min", "max", "basis", "per_sample", "known", "smoothness") if k in decl]
     if extra and not is_free:
         raise where.error(f"{', '.join(extra)} given but free is not true", key)
+    if "known" in decl and spectral:
+        raise where.error("known is for per-sample numbers (thickness_nm, n, k)", key)
+    values, known = _per_sample_values(where, key, decl, plain if isinstance(plain, list) else None)
+    if values is not None:
+        plain = values[0]  # the stack itself holds one value: the first sample's
     if is_free and free is not None:
         free.append(FreeDeclaration(path=path, kind=kind, name=f"{key}[{path[1]}]" if path[0] == "layers" else key,
                                     lower=bounds.get("min"), upper=bounds.get("max"), basis=basis,
                                     per_sample=per_sample, smoothness=float(smooth),
-                                    where=f"{where.source}: {where.table}"))
+                                    where=f"{where.source}: {where.table}", values=values, known=known))
     return plain
 
 

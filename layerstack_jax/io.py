@@ -53,8 +53,16 @@ fitting information to the value::
 Keys: ``value`` (or, for spectra, ``table`` / ``wavelength_nm`` + ``values``), ``free`` (bool),
 ``min``/``max`` (bounds; defaults thickness ≥ 0, α ≥ 0, 0 ≤ ρg ≤ 1, n ≥ 1), ``basis`` (spectra:
 number of B-spline functions or ``"free"``), ``per_sample`` (``layerstack fit --joint``: one value
-per spectrum) and ``smoothness`` (penalty weight). :func:`load_stack` ignores these keys (the
-value is used); :func:`load_fit_stack` also returns the declarations.
+per spectrum), ``known`` and ``smoothness`` (penalty weight). A per-sample number may start from
+one value per spectrum, some of them known (kept, not fitted) — a calibration series with one
+thickness measured::
+
+    thickness_nm = { value = [115000, 480000], free = true, per_sample = true, known = [true, false] }
+
+:func:`load_stack` ignores these keys (the value is used; of a list, the first);
+:func:`load_fit_stack` also returns the declarations. Tables of α, ρg or k whose rounding or
+baseline noise dips below 0 by at most 1e-3 of the table's largest value are clipped to 0 with a
+:class:`LayerstackWarning`; larger negative values are refused.
 
 Dispersion: wherever ``n`` is accepted it may also be an inline table with exactly one of
 

@@ -118,7 +118,7 @@ def test_batched_solve_holds_no_batched_lapack_call():
     found = calls(_solve.BLOCK)
     if not found:
         pytest.skip("this jaxlib lowers no LAPACK custom call on the CPU")
-    assert {t for t, _ in found} >= {"lapack_dgeqrf_ffi", "lapack_dsyevd_ffi"}  # QR step, stopping test
+    assert "lapack_dgeqrf_ffi" in {t for t, _ in found}  # the QR step (the stopping test: block QR or eigh)
     assert all(nb == 0 for _, nb in found), found
     assert any(nb > 0 for _, nb in calls(4))
 

@@ -466,4 +466,5 @@ def test_json_and_plot(tmp_path, incoherent):
     assert d["uncertainty_scaling"] == "given_sigma"
     fig = r.plot(tmp_path / "fit.png")
     assert (tmp_path / "fit.png").stat().st_size > 10_000
-    assert len(fig.axes) == 2
+    # the dataset (data and fit, residuals) and each fitted spectrum with its σ band
+    assert len(fig.axes) == 2 + len(r.spectra)

@@ -210,10 +210,18 @@ def refuse_cut_number(path, lines: TextLines, line: int, tokens: Sequence[str], 
     if last is None:  # a sign, a point or an 'e' alone
         raise error(path, line, f"{column}: the file ends inside a number: {tokens[k]!r} (truncated file?)")
     what = ("decimals", "significant digits", "exponent digits")
-    for i in range(3):
+    # a fixed format writes every number with the same decimals and exponent digits (%.4f, %.6e);
+    # '%g' or hand-typed numbers vary in them, and their last number is judged only in a long file
+    fixed_format = len({(o[0], o[2]) for o in others}) == 1
+    # a zero has no significant digits and '%g' writes it without an exponent: only its decimals tell
+    try:
+        zero = float(tokens[k].strip().replace(",", ".")) == 0.0
+    except ValueError:  # '1.5e', '2e-': cut inside the exponent
+        zero = False
+    for i in ((0,) if zero else range(3)):
         written = np.array([o[i] for o in others])
         more = int(np.sum(written > last[i]))
-        if more == written.size and np.all(written == written[0]):  # a fixed format, cut short
+        if fixed_format and more == written.size and np.all(written == written[0]):  # cut short
             where = f"every earlier row has {written[0]}"
         elif written.size >= 10 and more >= 0.95 * written.size:  # a long export, cut short
             where = f"{more} of the {written.size} rows before it have more"

@@ -15,7 +15,7 @@
 
 F1 runs in float64 and again, on the same data, in float32 (a subprocess with
 ``JAX_ENABLE_X64=0``: how a GPU user runs) — with the default 48 quadrature nodes per segment
-and with 24 (~1e-8 in R, README "Quadrature": below float32's own round-off) — with the largest
+and with 24 (~1e-8 in R, docs/guide/accuracy.md, "Quadrature": below float32's own round-off) — with the largest
 difference of each float32 fit's values from the float64 fit's in standard errors (the accuracy
 statement of ``tests/test_precision.py``).
 
@@ -185,7 +185,7 @@ def main(argv=None) -> None:
             if not a.no_float32 and m == "lm":
                 double = rows[-1]
                 rows.append(f1_float32(a.n, a.chunk, m, double))
-                # the per-pixel set-up: quadrature matched to float32 (24 nodes: ~1e-8, README)
+                # the per-pixel set-up: quadrature matched to float32 (24 nodes: ~1e-8, docs/guide/accuracy.md)
                 rows.append(f1_float32(a.n, a.chunk, m, double, nodes=24))
     if a.only in (None, "F2"):
         rows.extend(f2(method=m) for m in a.methods.split(","))

@@ -201,7 +201,7 @@ def test_bad_design_input():
 
 # ------------------------------------------------------------------ issue 18, row 10
 def _readme_needle_case():
-    """The README's call: 2 layers (SiO2 / TiO2, database), a 27-wavelength AR target."""
+    """The user guide's call (docs/guide/fitting.md): 2 layers (SiO2 / TiO2, database), a 27-wavelength AR target."""
     sio2, tio2 = ls.material("SiO2", "Malitson"), ls.material("TiO2", "Devore-o")
     wl = jnp.linspace(450.0, 650.0, 27)
     stack = ls.Stack(1.0, [ls.Layer(sio2, 100.0), ls.Layer(tio2, 100.0)], ls.Substrate(1.52))
@@ -246,7 +246,7 @@ def test_needle_design_shows_progress_and_keeps_min_thickness(capsys):
 
 @pytest.mark.slow
 def test_needle_design_readme_call_as_the_user_made_it(capsys):
-    """Exactly the README call (2 database layers, 27 λ; compiled L-BFGS-B, 5 iterations, 32
+    """Exactly the guide's call (2 database layers, 27 λ; compiled L-BFGS-B, 5 iterations, 32
     points per layer): minutes of compilation, now with a progress bar, and the final design
     keeps min_thickness_nm."""
     stack, targets, materials = _readme_needle_case()

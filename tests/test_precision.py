@@ -1,8 +1,8 @@
-"""float32 accuracy, as stated in the README ("Precision").
+"""float32 accuracy, as stated in the user guide (docs/guide/accuracy.md, "Precision").
 
 The float32 path runs in a subprocess with ``jax_enable_x64`` off (how a GPU user runs it) and is
 compared with the float64 path of this process, itself held to ≤ 1e-12 against ``tmm`` and the
-scipy-quad references elsewhere in the suite. The bounds below are the README's statement: a
+scipy-quad references elsewhere in the suite. The bounds below are the guide's statement: a
 test failure means the statement is wrong, not that the tolerance needs loosening.
 """
 
@@ -20,7 +20,7 @@ import pytest
 
 import layerstack_jax as ls
 
-#: README, "Precision": max |ΔR| of float32 against float64
+#: docs/guide/accuracy.md, "Precision": max |ΔR| of float32 against float64
 BOUNDS = {
     "coherent_10_layers": 2e-5,  # P1-like: 10 films on glass, 0–80°
     "coherent_10um_film": 5e-4,  # interference phase 4π n d cosθ/λ ~ 300 rad carries ~1e-5 relative error
@@ -90,7 +90,7 @@ def test_float32_accuracy_statement(float32_results, name):
 
 
 # ------------------------------------------------------------------ radiometric fits in float32
-#: README, "Precision": float32 fits of the radiometric F1 kind land within this many standard
+#: docs/guide/accuracy.md, "Precision": float32 fits of the radiometric F1 kind land within this many standard
 #: errors of the float64 fits of the same data (each solve stops within ``sigma_tol`` = 1e-3
 #: standard errors of its minimum; measured 2026-11-27: 6.6e-5 with 48 nodes, 8.1e-5 with 24,
 #: 5 solver steps in every case).

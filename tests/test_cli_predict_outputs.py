@@ -90,3 +90,10 @@ def test_incoherent_thickness_in_micrometres_is_called_out_on_the_command_line(t
     with pytest.warns(ls.LayerstackWarning, match=r"varnish\): thickness \(nm\) 30\.0.*µm given"):
         assert main(["predict", str(PAINTING), "-w", GRID, "-g", "45/0", "--vary", "varnish.thickness_nm=30,30000",
                      "-o", str(tmp_path / "v.csv")]) == 0
+
+
+def test_alpha_in_per_cm_is_called_out_on_the_command_line(tmp_path):
+    (tmp_path / "v.toml").write_text('[[layers]]\nname = "varnish"\nn = 1.54\nthickness_nm = 30000\ncoherent = false\n'
+                                     'alpha_per_nm = 20\n[background]\nn = 1.5\nrho_g = 0.6\n')
+    with pytest.warns(ls.LayerstackWarning, match=r"varnish\): alpha \(1/nm\) 20\.0.*1/cm given"):
+        assert main(["predict", str(tmp_path / "v.toml"), "-w", GRID, "-g", "45/0", "-o", str(tmp_path / "v.csv")]) == 0

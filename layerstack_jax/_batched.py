@@ -73,8 +73,8 @@ from ._geometry import Geometry, fixed_optics, reflectance
 from ._quadrature import DEFAULT_NODES
 from ._progress import reporter
 from ._leaves import stack_leaves
-from ._stack import Stack
-from ._validate import LayerstackError, is_concrete
+from ._stack import Stack, check_stack
+from ._validate import LayerstackError, collecting_checks, is_concrete
 
 __all__ = ["predict", "batch_layout", "BatchLayout", "DEFAULT_CHUNK", "DEFAULT_STEP", "AUTO_CHUNK_MAX",
            "MEMORY_FRACTION", "MemoryBudget", "memory_budget"]
@@ -326,13 +326,19 @@ _MEASURED: "collections.OrderedDict[tuple, tuple]" = collections.OrderedDict()
 
 
 def _spectrum_function(treedef, shared: list, batched: tuple, wl, geometry: Geometry, nodes: int, optics):
-    """``rows -> one spectrum``: the stack rebuilt from shared constants and one batch row."""
+    """``rows -> (one spectrum, implausible)``: the stack rebuilt from shared constants and one
+    batch row; ``implausible``: any of its plausibility tests (µm for nm …) flagged the row
+    (:func:`~layerstack_jax._validate.collecting_checks`: a flag per row instead of a call back
+    to the host from inside the loop)."""
 
     def spectrum(rows):
         it = iter(rows)
         leaves = [next(it) if b else s for s, b in zip(shared, batched)]
         stack = jax.tree_util.tree_unflatten(treedef, leaves)
-        return reflectance(stack, wl, geometry, nodes=nodes, optics=optics)
+        with collecting_checks(errors=False) as checks:
+            out = reflectance(stack, wl, geometry, nodes=nodes, optics=optics)
+        flags = [jnp.any(flag) for flag, _, _ in checks.warnings]
+        return out, jnp.any(jnp.stack(flags)) if flags else jnp.zeros((), bool)
 
     return spectrum
 
@@ -538,12 +544,20 @@ def predict(stack: Stack, wavelength_nm, geometry: Geometry, *, batch_shape=None
     update = reporter(progress, n, desc="predict", unit="spectrum", auto=n > 100_000)
     t0 = time.perf_counter()
     flat_out = None
+    warned = False
     for start in range(0, n, step):
         idx = np.arange(start, start + step)
         valid = min(step, n - start)
         idx[valid:] = start  # pad the last call with copies of its first row: one compiled shape
         rows = tuple(_rows(leaf, batch, core, idx) for leaf, core in batched)
-        values = np.asarray(fn(rows))
+        values, implausible = fn(rows)
+        values = np.asarray(values)
+        if not warned and np.any(np.asarray(implausible)[:valid]):  # the first flagged row, eagerly: the message
+            warned = True                                             # names the field and its values
+            row = int(np.argmax(np.asarray(implausible)[:valid]))
+            one = iter(r[row] for r in rows)
+            check_stack(jax.tree_util.tree_unflatten(treedef, [next(one) if b else leaf for leaf, b
+                                                               in zip(leaves, lay.batched)]), wl)
         if flat_out is None:
             out, flat_out = _output(out, batch, values.shape[1:], values.dtype)
         flat_out[start:start + valid] = values[:valid]
@@ -631,5 +645,5 @@ def _predict_traced(leaves, treedef, lay: BatchLayout, wl, geometry: Geometry, n
                  for leaf, core, b in zip(leaves, lay.cores, lay.batched) if b)
     shared = [None if b else leaf for leaf, b in zip(leaves, lay.batched)]
     spectrum = _spectrum_function(treedef, shared, lay.batched, wl, geometry, nodes, None)
-    values = jax.lax.map(spectrum, rows, batch_size=min(chunk, n))
+    values, _ = jax.lax.map(spectrum, rows, batch_size=min(chunk, n))  # no warnings inside a transformation
     return jnp.reshape(values, batch + values.shape[1:])

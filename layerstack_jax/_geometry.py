@@ -877,7 +877,6 @@ def _spelled_angles(text: str) -> np.ndarray:
     return np.asarray(numbers if numbers else [0.0])
 
 
-@public_program
 def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int = DEFAULT_NODES) -> Optics:
     """The :class:`Optics` of ``stack`` measured in ``geometry`` on ``wavelength_nm`` (nm).
 

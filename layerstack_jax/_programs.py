@@ -18,7 +18,11 @@ naming the field and its values; flagged plausibility tests are warned on the ho
 traced values (inside the user's ``jit``, ``grad`` or ``vmap``) the function runs as it is,
 inlined into the user's program. Functions that compile their own core (``coated_rough``,
 ``he_torrance_brdf``, ``coating_tables``: an ``equinox.filter_jit`` inside) are not wrapped; a
-function that cannot be traced as one program runs op by op, as before.
+function that cannot be traced as one program runs op by op, as before. :func:`fixed_optics`
+is not wrapped either: the optics it returns are reused by many later evaluations, and made from
+concrete indices they carry a static layout of the hemispherical nodes (which node segments
+reach which layers, :func:`~layerstack_jax._illumination.hemisphere`) that traced indices
+cannot give.
 
 Compiled programs are also kept on disk by JAX's persistent compilation cache, which the first
 compilation turns on (:func:`use_compilation_cache`) unless the user configured one or set

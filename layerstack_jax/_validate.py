@@ -73,8 +73,10 @@ def value_text(a: np.ndarray) -> str:
     if a.size == 1:
         return repr(a.reshape(()).item())
     if np.iscomplexobj(a):
-        return f"values in [{a.real.min()!r}, {a.real.max()!r}] + i[{a.imag.min()!r}, {a.imag.max()!r}]"
-    return f"range [{np.nanmin(a)!r}, {np.nanmax(a)!r}]" if np.any(np.isfinite(a)) else "no finite value"
+        return (f"values in [{float(a.real.min())!r}, {float(a.real.max())!r}] + "
+                f"i[{float(a.imag.min())!r}, {float(a.imag.max())!r}]")
+    return (f"range [{float(np.nanmin(a))!r}, {float(np.nanmax(a))!r}]" if np.any(np.isfinite(a))
+            else "no finite value")
 
 
 class PendingChecks:
@@ -110,9 +112,11 @@ class ProgramChecks:
     ``errors``: one boolean per traced check (True: the input violates it); ``warnings``:
     ``(flag, values, message)`` per plausibility test, ``message(values_as_numpy) -> str``. The
     program returns the flags (and the values of flagged tests) next to its result; the host
-    decides (:mod:`layerstack_jax._programs`)."""
+    decides (:mod:`layerstack_jax._programs`). With ``errors=False`` only the plausibility tests
+    are collected; traced checks stay ``equinox.error_if`` (a batched prediction's loop body)."""
 
-    def __init__(self):
+    def __init__(self, errors: bool = True):
+        self.collect_errors = errors
         self.errors: list = []
         self.warnings: list = []
 
@@ -121,10 +125,11 @@ _PROGRAM_CHECKS: contextvars.ContextVar = contextvars.ContextVar("layerstack_pro
 
 
 @contextlib.contextmanager
-def collecting_checks():
-    """Within this block, traced checks and plausibility tests are collected into the yielded
-    :class:`ProgramChecks` instead of ``equinox.error_if`` / being skipped."""
-    collector = ProgramChecks()
+def collecting_checks(errors: bool = True):
+    """Within this block, traced plausibility tests — and, with ``errors``, traced checks — are
+    collected into the yielded :class:`ProgramChecks` instead of calling back to the host /
+    ``equinox.error_if``."""
+    collector = ProgramChecks(errors)
     token = _PROGRAM_CHECKS.set(collector)
     try:
         yield collector
@@ -170,7 +175,7 @@ def check(name: str, x, bad: Callable, what: str, *, pending: Optional[PendingCh
     if not _TRACED_CHECKS.get():
         return xj
     collector = _PROGRAM_CHECKS.get()
-    if collector is not None:
+    if collector is not None and collector.collect_errors:
         collector.errors.append(jnp.any(bad(xj, jnp)))
         return xj
     if pending is not None:
@@ -197,7 +202,7 @@ def check_wavelength_range(name: str, x, lo: float, hi: float):
         return x
     outside = (x < lo - 1e-9) | (x > hi + 1e-9)
     collector = _PROGRAM_CHECKS.get()
-    if collector is not None:
+    if collector is not None and collector.collect_errors:
         collector.errors.append(jnp.any(outside))
         return x
     return eqx.error_if(x, outside, f"{name}: wavelengths outside the data range {lo:g}–{hi:g} nm")
@@ -248,9 +253,9 @@ def warn_if(values, implausible: Callable, message: Callable, *, stacklevel: int
     Concrete values: tested and warned at once (``message`` gets numpy arrays). Traced values
     while a public program is traced (:func:`collecting_checks`): the test becomes an output of the
     program and the host warns after it ran. Traced values elsewhere (inside a user's ``jit``,
-    ``grad`` or ``vmap``): the program calls back to the host with the test's outcome
-    (``jax.debug.callback``), which warns when it is True; not inside :func:`traced_checks_off`
-    (a solver's trial points).
+    ``grad`` or ``vmap``): when the test is True the program calls back to the host
+    (``jax.debug.callback`` in a ``lax.cond``: nothing but the test runs otherwise), which warns;
+    not inside :func:`traced_checks_off` (a solver's trial points).
     """
     if is_concrete(values):
         a = jax.tree_util.tree_map(np.asarray, values)
@@ -261,8 +266,9 @@ def warn_if(values, implausible: Callable, message: Callable, *, stacklevel: int
     collector = _PROGRAM_CHECKS.get()
     if collector is not None:
         collector.warnings.append((flag, values, message))
-    elif _TRACED_CHECKS.get():
-        jax.debug.callback(functools.partial(_warn_on_host, message), flag, values)
+    elif _TRACED_CHECKS.get():  # the call back runs only when flagged (vmapped: the host tests the flag)
+        jax.lax.cond(flag, lambda: jax.debug.callback(functools.partial(_warn_on_host, message), flag, values),
+                     lambda: None)
 
 
 def _warn_on_host(message: Callable, flag, values) -> None:
@@ -288,5 +294,5 @@ def check_agree(message: str, a, b, *, rtol: float) -> None:
             raise LayerstackError(message)
         return
     collector = _PROGRAM_CHECKS.get()
-    if collector is not None and _TRACED_CHECKS.get():
+    if collector is not None and collector.collect_errors and _TRACED_CHECKS.get():
         collector.errors.append(jnp.any(jnp.abs(jnp.asarray(a) - jnp.asarray(b)) > rtol * jnp.abs(jnp.asarray(b))))

@@ -255,7 +255,8 @@ def warn_if(values, implausible: Callable, message: Callable, *, stacklevel: int
     program and the host warns after it ran. Traced values elsewhere (inside a user's ``jit``,
     ``grad`` or ``vmap``): when the test is True the program calls back to the host
     (``jax.debug.callback`` in a ``lax.cond``: nothing but the test runs otherwise), which warns;
-    not inside :func:`traced_checks_off` (a solver's trial points).
+    under ``vmap`` once per call, with the first flagged element's values
+    (:func:`_first_flagged`); not inside :func:`traced_checks_off` (a solver's trial points).
     """
     if is_concrete(values):
         a = jax.tree_util.tree_map(np.asarray, values)
@@ -266,9 +267,29 @@ def warn_if(values, implausible: Callable, message: Callable, *, stacklevel: int
     collector = _PROGRAM_CHECKS.get()
     if collector is not None:
         collector.warnings.append((flag, values, message))
-    elif _TRACED_CHECKS.get():  # the call back runs only when flagged (vmapped: the host tests the flag)
+    elif _TRACED_CHECKS.get():
+        flag, values = _first_flagged(flag, jax.lax.stop_gradient(values))
         jax.lax.cond(flag, lambda: jax.debug.callback(functools.partial(_warn_on_host, message), flag, values),
                      lambda: None)
+
+
+@jax.custom_batching.custom_vmap
+def _first_flagged(flag, values):
+    """``(flag, values)`` as given; under ``vmap``, unbatched: whether any element is flagged and
+    the first flagged element's values. A batched flag would turn the ``lax.cond`` of
+    :func:`warn_if` into a select that runs the call back for every element, and JAX unrolls a
+    vmapped ``jax.debug.callback`` into one call per element (2000 draws: 2000 call backs compiled)."""
+    return flag, values
+
+
+@_first_flagged.def_vmap
+def _first_flagged_vmap(axis_size, in_batched, flag, values):
+    flag_batched, values_batched = in_batched
+    first = jnp.argmax(flag) if flag_batched else 0
+    flag = jnp.any(flag) if flag_batched else flag
+    values = jax.tree_util.tree_map(lambda v, b: v[first] if b else v, values, values_batched)
+    flag, values = _first_flagged(flag, values)  # an outer vmap reduces its own axis in turn
+    return (flag, values), (False, jax.tree_util.tree_map(lambda _: False, values))
 
 
 def _warn_on_host(message: Callable, flag, values) -> None:

@@ -5,7 +5,8 @@
   appear in the output.
 * Each ``layerstack …`` command of the bash blocks (```` ```bash ````, ``\\`` continuations joined,
   ``# comments`` dropped) runs through the command line's ``main`` in the repository root, with
-  its outputs (``-o``, ``--output``, ``--plot``) redirected to a temporary directory.
+  its outputs (``-o``, ``--output``, ``--plot``) redirected to a temporary directory. It must exit
+  0, unless its comment states another status (``# exit status 1: …``).
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ import shlex
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+#: ``layerstack …  # exit status N: why``
+_EXIT = re.compile(r"#\s*exit status (\d+)")
 
 #: ``print(...)  # → expected text``
 _EXPECTED = re.compile(r"^\s*print\(.*#\s*→\s*(.+?)\s*$", re.M)
@@ -32,9 +36,10 @@ def layerstack_commands(text: str) -> list[str]:
     out = []
     for block in code_blocks(text, "bash"):
         for line in block.replace("\\\n", " ").splitlines():
-            line = line.split(" #", 1)[0].strip()
-            if line.startswith("layerstack "):
-                out.append(line)
+            command, _, comment = line.partition(" #")
+            if command.strip().startswith("layerstack "):
+                stated = _EXIT.search("#" + comment)
+                out.append(command.strip() + (f"  # exit status {stated.group(1)}" if stated else ""))
     return out
 
 
@@ -59,15 +64,17 @@ def run_python(text: str, name: str) -> tuple[str, dict]:
 
 def run_command(command: str, tmp_path: Path, monkeypatch) -> None:
     """Run one ``layerstack …`` command line through ``layerstack_cli.main`` in the repository
-    root, outputs redirected into ``tmp_path``; it must exit 0."""
+    root, outputs redirected into ``tmp_path``; it must exit with the status its comment states
+    (``# exit status N``), 0 if none."""
     from layerstack_cli import main
 
-    args = shlex.split(command)[1:]
+    stated = _EXIT.search(command)
+    args = shlex.split(command, comments=True)[1:]
     for i, a in enumerate(args[:-1]):
         if a in ("-o", "--output", "--plot"):
             args[i + 1] = str(tmp_path / Path(args[i + 1]).name)
     monkeypatch.chdir(ROOT)
-    assert main(args) == 0, command
+    assert main(args) == (int(stated.group(1)) if stated else 0), command
 
 
 def local_links(text: str) -> list[str]:

@@ -66,7 +66,8 @@ def _old_directional(rs, g, nodes):
 
 def test_defaults_read_bit_for_bit_as_the_ideal_instrument():
     """Every new field at its default (or given as an explicit 0 / None) reads exactly what the
-    ideal formulas read (array_equal, not allclose), also through fixed_optics."""
+    ideal formulas read (array_equal, not allclose); through the public ``ls.reflectance`` (one
+    compiled XLA program, whose fusions may round differently from the op-by-op formula) to 4 ulp."""
     rs = resolve(ST, WL)
     nodes = NODES
     for spec in ("excluded", "included"):
@@ -74,8 +75,9 @@ def test_defaults_read_bit_for_bit_as_the_ideal_instrument():
         for g in (ls.Sphere(8.0, spec), ls.Sphere(8.0, spec, port_half_angle_deg=0.0, wall_reflectance=None,
                                                     sample_port_fraction=0.0, cover_index=None)):
             assert np.array_equal(np.asarray(g.measure(ST, WL, nodes=nodes)), want)
-        assert np.array_equal(np.asarray(ls.reflectance(ST, WL, g, nodes=nodes,
-                                                        optics=ls.fixed_optics(ST, WL, g, nodes=nodes))), want)
+        np.testing.assert_array_max_ulp(np.asarray(ls.reflectance(ST, WL, g, nodes=nodes,
+                                                                  optics=ls.fixed_optics(ST, WL, g, nodes=nodes))),
+                                        want, maxulp=4)
     want = np.asarray(_old_directional(rs, ls.Directional(45.0, 0.0), nodes))
     for g in (ls.Directional(45.0, 0.0), ls.Directional(45.0, 0.0, 0.0, 0.0)):
         assert np.array_equal(np.asarray(g.measure(ST, WL, nodes=nodes)), want)
@@ -402,7 +404,7 @@ def test_optics_of_another_aperture_or_port_are_refused():
 
 def test_brdf_as_built_is_the_directional_reading_over_pi():
     """BRDF takes the same apertures and cover glass: its reading is Directional's / π (eq. 76);
-    ideal by default (bit for bit); spelled brdf:I:V:illum=…; the polarized BRDF refuses them."""
+    ideal by default (to 4 ulp: BRDF's reading is its own compiled program); spelled brdf:I:V:illum=…; the polarized BRDF refuses them."""
     kw = dict(illumination_half_angle_deg=2.0, viewing_half_angle_deg=3.0, cover_index=1.5)
     got = np.asarray(ls.BRDF(45.0, 0.0, **kw).measure(VARNISH, WL, nodes=NODES))
     want = np.asarray(ls.Directional(45.0, 0.0, **kw).measure(VARNISH, WL, nodes=NODES)) / np.pi
@@ -410,7 +412,8 @@ def test_brdf_as_built_is_the_directional_reading_over_pi():
     np.testing.assert_allclose(ls.invert_background(VARNISH, WL, got, ls.BRDF(45.0, 0.0, **kw), nodes=NODES), 0.7,
                                rtol=0, atol=1e-12)
     ideal = np.asarray(ls.BRDF(45.0, 0.0).measure(VARNISH, WL, nodes=NODES))
-    assert np.array_equal(ideal, np.asarray(ls.Directional(45.0, 0.0).measure(VARNISH, WL, nodes=NODES)) / jnp.pi)
+    np.testing.assert_array_max_ulp(ideal, np.asarray(ls.Directional(45.0, 0.0).measure(VARNISH, WL, nodes=NODES))
+                                    / np.pi, maxulp=4)
     g = ls.parse_geometry("brdf:45:0:illum=2:view=3:cover=1.5")
     assert g == ls.BRDF(45.0, 0.0, **kw) and ls.parse_geometry(g.label) == g
     assert ls.BRDF(45.0, 0.0).label == "brdf:45:0"

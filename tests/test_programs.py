@@ -147,6 +147,24 @@ def test_unit_slips_warn_eagerly_and_under_jit(name):
                          - np.asarray(ls.reflectance(build(slip), WL, geometry)))) > 0.01
 
 
+def test_under_vmap_one_call_back_warns_with_the_first_flagged_draw():
+    """A vmapped (and nested-vmapped, differentiated) batch warns once per call, naming the first
+    flagged element's value; the compiled program holds one call back, not one per element (JAX
+    unrolls a vmapped ``jax.debug.callback``: 2000 draws compiled 2000 call backs)."""
+    geometry = ls.Directional(45.0, 0.0)
+    h = np.full(400, 25_000.0)
+    h[[137, 300]] = [30.0, 40.0]  # two draws given in µm
+    one = jax.jit(lambda x: ls.reflectance(_varnish(h=x), WL, geometry))
+    caught = _warnings_of(lambda: jax.vmap(one)(h).block_until_ready())
+    assert len(caught) == 1 and re.search(r"thickness \(nm\) 30\.0.*µm given", caught[0]), caught
+    text = jax.jit(jax.vmap(one)).lower(h).as_text()
+    assert text.count("callback") <= 4, "one call back per element was compiled"
+    nested = jax.vmap(jax.vmap(jax.grad(lambda x: jnp.sum(one(x)))))
+    caught = _warnings_of(lambda: nested(h.reshape(20, 20)).block_until_ready())
+    assert len(caught) == 1 and re.search(r"thickness \(nm\) 30\.0", caught[0]), caught
+    assert _warnings_of(lambda: jax.vmap(one)(np.full(400, 25_000.0)).block_until_ready()) == []
+
+
 def test_radian_angles_in_geometry_spellings_warn():
     with pytest.warns(ls.LayerstackWarning, match=r"specular:1\.2217.*radians given"):
         ls.parse_geometry("specular:1.2217")

@@ -82,7 +82,8 @@ def _write(out_dir, command, mode, machine, benches, peers, reg, rows, section_r
     payload["targets"] = targets(payload)
     payload["total_wall_s"] = time.perf_counter() - t_start
     jp = _harness.write_json(payload, Path(out_dir) / "latest.json")
-    mp = _harness.write_markdown(payload, Path(out_dir) / "latest.md")
+    mp = _harness.write_markdown(payload, Path(out_dir) / "latest.md",
+                                 _sections.markdown_lines(payload.get("sections", {})))
     return mp, jp
 
 

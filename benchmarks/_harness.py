@@ -533,8 +533,10 @@ MD_COLUMNS: list[tuple[str, str, str]] = [
 ]
 
 
-def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "latest.md") -> Path:
-    """Markdown report: machine summary, results table, per-row notes, peer status list."""
+def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "latest.md",
+                   section_lines: list[str] = ()) -> Path:
+    """Markdown report: machine summary, results table, per-row notes, peer status list, then
+    ``section_lines`` (the whole-model sections, :func:`benchmarks._sections.markdown_lines`)."""
     m = payload.get("machine", {})
     v = m.get("versions", {})
     lines = [f"# layerstack benchmarks — {m.get('timestamp', '')}", ""]
@@ -602,33 +604,5 @@ def write_markdown(payload: dict, path: str | os.PathLike = RESULTS_DIR / "lates
         for name, st in hooks.items():
             lines.append(f"- {name}: {st}")
         lines.append("")
-    lines += _sections_markdown(payload.get("sections", {}))
+    lines += list(section_lines)
     return _atomic_write(Path(path), "\n".join(lines))
-
-
-SECTION_TITLES = {
-    "P2": "P2 — incoherent layers over a Lambertian background (sphere SCE)",
-    "P3": "P3 — mixed stack: coherent films on an incoherent varnish over a Lambertian background (45°/0°)",
-    "MEMORY": "Memory — 100,000 spectra in chunks",
-    "SCALING": "Scaling — time vs layers, wavelengths, angles, batch",
-    "ACCURACY": "Accuracy vs cost — diffuse-reflectance quadrature",
-    "PRECISION": "float32 vs float64 (CPU)",
-}
-
-
-def _sections_markdown(sections: dict) -> list[str]:
-    from . import _sections
-
-    lines: list[str] = []
-    for name, res in sections.items():
-        lines += [f"## {SECTION_TITLES.get(name, name)}", ""]
-        if res.get("status") != "ok":
-            lines += [f"**{name}: {res.get('status')}**", ""]
-            continue
-        try:
-            lines += _sections.section_module(name).markdown(res)
-        except Exception as e:  # a report bug must not lose the run
-            lines.append(f"(could not render {name}: {type(e).__name__}: {e}; see latest.json)")
-        lines += ["", f"Section process: peak RSS {res.get('peak_rss_bytes', 0) / 2**20:.0f} MiB, "
-                  f"wall {res.get('process_wall_s', 0):.0f} s.", ""]
-    return lines

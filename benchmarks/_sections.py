@@ -113,6 +113,33 @@ def section_module(name: str):
     return importlib.import_module(SECTIONS[name].partition(":")[0])
 
 
+SECTION_TITLES = {
+    "P2": "P2 — incoherent layers over a Lambertian background (sphere SCE)",
+    "P3": "P3 — mixed stack: coherent films on an incoherent varnish over a Lambertian background (45°/0°)",
+    "MEMORY": "Memory — 100,000 spectra in chunks",
+    "SCALING": "Scaling — time vs layers, wavelengths, angles, batch",
+    "ACCURACY": "Accuracy vs cost — diffuse-reflectance quadrature",
+    "PRECISION": "float32 vs float64 (CPU)",
+}
+
+
+def markdown_lines(sections: dict) -> list[str]:
+    """The report's part on the sections: each result rendered by its module's ``markdown``."""
+    lines: list[str] = []
+    for name, res in sections.items():
+        lines += [f"## {SECTION_TITLES.get(name, name)}", ""]
+        if res.get("status") != "ok":
+            lines += [f"**{name}: {res.get('status')}**", ""]
+            continue
+        try:
+            lines += section_module(name).markdown(res)
+        except Exception as e:  # a report bug must not lose the run
+            lines.append(f"(could not render {name}: {type(e).__name__}: {e}; see latest.json)")
+        lines += ["", f"Section process: peak RSS {res.get('peak_rss_bytes', 0) / 2**20:.0f} MiB, "
+                  f"wall {res.get('process_wall_s', 0):.0f} s.", ""]
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks._sections")
     ap.add_argument("section", choices=list(SECTIONS))

@@ -101,7 +101,7 @@ def s1(repeats: int, dense: bool) -> dict:
     t = time.perf_counter()
     first = ft.fit(obj)
     out["first_fit_s"] = time.perf_counter() - t
-    out["structure"] = repr(ft._structured.structure_for(obj, "auto", "lm"))
+    out["structure"] = repr(ft._solve.structure_for(obj, "auto", "lm"))
     times, lib_x, sp_times, sp_x, nfev, steps = [], [], [], [], [], []
     for _ in range(repeats):
         data = clean + SIGMA * rng.standard_normal(clean.shape)
@@ -182,7 +182,7 @@ def s2(batch: int, repeats: int) -> dict:
     t = time.perf_counter()
     ft.fit(obj)
     out["first_fit_s"] = time.perf_counter() - t
-    out["structure"] = repr(ft._structured.structure_for(obj, "auto", "lm"))
+    out["structure"] = repr(ft._solve.structure_for(obj, "auto", "lm"))
     times = []
     for _ in range(repeats):
         data = [clean + SIGMA * rng.standard_normal(clean.shape), bare + SIGMA * rng.standard_normal(bare.shape)]

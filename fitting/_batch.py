@@ -21,14 +21,14 @@ sees both the coated samples and the uncoated background.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Callable, Optional, Union
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background
-from layerstack_jax._progress import reporter
+from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background, progress_reporter
 
 from ._objective import Dataset, Objective
 from ._parameters import alpha as alpha_parameter
@@ -36,7 +36,7 @@ from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
 from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
-                     require_compiled_method, settle_on_bounds, starting_point)
+                     refit_chi2, require_compiled_method, settle_on_bounds, starting_point)
 from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
                           fit_statistics, separability_summary)
 from ._status import CONVERGED, INVALID_DATA, result_message
@@ -293,7 +293,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
     y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
     y0 = jnp.broadcast_to(y0, (chunk,) + y0.shape)
     fn = compiled_fit(objective, o, batched=True)
-    report = reporter(progress, n, desc="fit_batch", unit="fit", auto=n_chunks > 1)
+    report = progress_reporter(progress, n, desc="fit_batch", unit="fit", auto=n_chunks > 1)
     for name, v in (("timeout_s", timeout_s), ("stall_s", stall_s)):
         if v is not None and not (isinstance(v, (int, float)) and v > 0):
             raise LayerstackError(f"{name} must be > 0 seconds or None, got {v!r}")
@@ -325,7 +325,7 @@ def fit_batch(objective: Objective, data, method: str = "lm", *, chunk_size: int
             full[i] = build_result(objective, o, row, jax.tree.map(lambda a: a[k], args),
                                    scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                                    note=bound_note(method, names, bool(settled[k]), int(finished[k])),
-                                   stats=_row(stats, k))
+                                   stats=_row(stats, k), refit=functools.partial(refit_chi2, objective, o))
 
     def spread(a, fill):  # rows of the fits made -> all N rows
         a = np.asarray(a)

@@ -1,7 +1,7 @@
 r"""Fitting a hyperspectral cube pixel by pixel, out of core, resumable, locally or on Dask.
 
 :func:`fit_cube` fits every pixel spectrum of a cube ``(y, x, wavelength)`` (read lazily:
-:func:`layerstack_jax._cubes.open_cube`) with the same :class:`~fitting.Objective` — one
+:func:`layerstack_jax.open_cube`) with the same :class:`~fitting.Objective` — one
 dataset, one sample; only the data differ, as in :func:`~fitting.fit_batch`, which does the
 fitting — and writes maps into a zarr store, region by region:
 
@@ -60,9 +60,9 @@ fitting — and writes maps into a zarr store, region by region:
   the worker processes that run a region).
 * progress: pixels done, rate and ETA on a tqdm bar and in the ``fitting.cube`` logger.
 * ``chunk="auto"`` (the default) sizes the regions from the memory of where they run
-  (:func:`auto_region`): the budget is half (:data:`layerstack_jax._batched.MEMORY_FRACTION`)
+  (:func:`auto_region`): the budget is half (:data:`layerstack_jax.MEMORY_FRACTION`)
   of the smallest Dask worker's ``memory_limit`` per thread (``Client.scheduler_info()``), or of
-  this process's available memory (:func:`layerstack_jax._batched.memory_budget`) without a
+  this process's available memory (:func:`layerstack_jax.memory_budget`) without a
   cluster; the solver's memory is measured on the compiled solver for ``chunk_size`` fits (the
   program every region runs: in this process the compilation is reused; with a cluster this
   process compiles it once more, to measure it). The resolved region
@@ -77,7 +77,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import math
 import os
 import re
 import time
@@ -89,14 +88,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import LayerstackError
-from layerstack_jax import _batched
-from layerstack_jax._cubes import open_cube
-from layerstack_jax._progress import reporter
+from layerstack_jax import MEMORY_FRACTION, LayerstackError, MemoryBudget, memory_budget, open_cube, progress_reporter
 
 from ._batch import fit_batch
 from ._objective import Objective
-from ._results import linearised_covariance
+from ._results import linearised_covariance, structural_degeneracy
 from ._solve import require_compiled_method
 
 __all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
@@ -143,24 +139,6 @@ _SAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
 def _var(name: str) -> str:
     """A zarr-safe variable name for a parameter component (``varnish.alpha[3]`` → ``varnish.alpha_3``)."""
     return _SAFE.sub("_", name).strip("_") or "parameter"
-
-
-def structural_degeneracy(objective: Objective) -> list:
-    """Degeneracies of ``objective`` by construction, known without computing anything: one
-    message per incoherent layer whose thickness and α are both free (only α·h enters Beer's
-    law, Simonot eq. 20: no data can separate them). A known value of either — one sample's
-    thickness in a series, one fixed α coefficient — breaks the trade-off α → kα, h → h/k: no
-    message then."""
-    free = {p.path for p in objective.layout.params if not np.any(p.fixed)}
-    out = []
-    for i, layer in enumerate(objective.stack.layers):
-        refs = (i, layer.name) if layer.name else (i,)
-        if not layer.coherent and any(("layers", r, "thickness") in free for r in refs) \
-                and any(("layers", r, "alpha") in free for r in refs):
-            label = layer.name or f"layers[{i}]"
-            out.append(f"{label}: thickness and alpha are both free, but an incoherent layer's spectra depend on "
-                       "them only through alpha·h (Beer's law): fix one of them (e.g. a known thickness)")
-    return out
 
 
 def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
@@ -246,14 +224,14 @@ def _budget_and_slots(c, memory: Optional[int]):
                        int(w.get("nthreads", 1) or 1)) for w in workers.values() if w.get("memory_limit")]
         if per_thread:
             share, limit, threads = min(per_thread)
-            f = _batched.MEMORY_FRACTION
-            budget = _batched.MemoryBudget(int(share * f), share, f,
+            f = MEMORY_FRACTION
+            budget = MemoryBudget(int(share * f), share, f,
                                            f"smallest Dask worker memory_limit {limit / 1e6:.4g} MB / {threads} "
                                            f"thread(s), {len(workers)} worker(s)")
     if memory is not None:
-        budget = _batched.MemoryBudget(int(memory), int(memory), 1.0, "given (memory=)")
+        budget = MemoryBudget(int(memory), int(memory), 1.0, "given (memory=)")
     if budget is None:
-        budget = _batched.memory_budget()
+        budget = memory_budget()
         if c is not None:
             budget = budget._replace(source=budget.source + " of this process (the workers state no memory limit)")
     return budget, slots
@@ -274,7 +252,7 @@ def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *
     ``T``, ``A``, ``O``: the temp, argument and output bytes of the compiled solver for
     ``chunk_size`` fits (``compiled.memory_analysis()``, measured); ``maps``: the bytes of one
     pixel of all the maps. ``p`` is the largest that fits ``budget`` (a
-    :class:`layerstack_jax._batched.MemoryBudget`; default: :func:`~layerstack_jax._batched.memory_budget`),
+    :class:`layerstack_jax.MemoryBudget`; default: :func:`~layerstack_jax.memory_budget`),
     at most :data:`AUTO_REGION_MAX` (in pixels) and at most
     ``⌈pixels / (AUTO_REGIONS_PER_WORKER × slots)⌉`` (but not below ``chunk_size``: a smaller
     region would pad one solver call); then shaped by :func:`_region_shape` (the fewest padded
@@ -284,7 +262,7 @@ def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *
     Returns ``((rows, columns), sizing)``, ``sizing`` a dict of the numbers used (bytes).
     """
     ny, nx = shape
-    budget = _batched.memory_budget() if budget is None else budget
+    budget = memory_budget() if budget is None else budget
     temp, args, outs = _solver_memory(objective, method, chunk_size, bands, tuple(fit_options))
     maps = sum(v.itemsize for v in _empty_maps((1, 1), tuple(objective.layout.names)).values())
     per_pixel = bands * (itemsize + 16) + 2 * (args + outs) / chunk_size + 2 * maps
@@ -545,7 +523,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
     Args:
         objective: a :class:`~fitting.Objective` with one dataset of one sample on the cube's
             wavelengths; its data are a placeholder (only σ/weights and band mask are used).
-        cube: a cube from :mod:`layerstack_jax._cubes` (or anything :func:`open_cube` opens: a
+        cube: a cube (anything :func:`layerstack_jax.open_cube` opens: a
             path, an array ``(y, x, band)`` with ``wavelength_nm``, a DataArray).
         out: path of the zarr store written (created, or resumed).
         mask: optional boolean ``(y, x)``, True where pixels are to be fitted.
@@ -673,7 +651,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         settings = _Settings(out, names, method, chunk_size, saturation, used_bands, fit_opts,
                              bool(jax.config.jax_enable_x64), _negative_floor(objective, negative_sigmas),
                              bool(objective.sigma_given))
-        report = reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
+        report = progress_reporter(progress, total, desc="fit_cube", unit="px", initial=done_px)
         t0 = time.perf_counter()
         done0 = done_px
 

@@ -37,7 +37,6 @@ from jaxtyping import Array, Float, Real
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
-from layerstack_jax._progress import reporter
 
 from ._bounded import BoundedSolution, compiled_lbfgsb, host_lbfgsb
 
@@ -516,7 +515,7 @@ def needle_design(
     def refine(st):
         return optimize_thicknesses(st, targets, bounds_nm=bounds_nm, maxiter=maxiter, method=method)
 
-    update = reporter(progress, iterations + 1, desc="needle design", unit="step")
+    update = ls.progress_reporter(progress, iterations + 1, desc="needle design", unit="step")
     step = 0
     try:
         result = start if start is not None else refine(stack)

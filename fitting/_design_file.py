@@ -117,7 +117,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import layerstack_jax as ls
-from layerstack_jax._stack import resolve
 from layerstack_jax import LayerstackError
 from layerstack_jax.io import (FREE_KEYS, FileLocation, is_number, named_tables, read_material, read_number,
                                read_toml, reject_unknown_keys, stack_from_dict)
@@ -461,7 +460,7 @@ def _check_grids(source: str, stack: ls.Stack, targets: tuple, needle: Optional[
         wl = np.asarray(part.colour_space.wavelength_nm if target.is_colour else part.wavelength_nm)
         candidates = zip(needle.names, needle.materials) if needle else ()
         try:
-            resolve(stack, wl)
+            ls.check_stack(stack, wl)
             for name, m in candidates:
                 try:
                     m(wl)
@@ -796,7 +795,7 @@ def _plot_grid(stack: ls.Stack, wl: np.ndarray) -> np.ndarray:
     for a, b in ((max(lo - pad, 1.0), hi + pad), (lo, hi)):
         grid = np.linspace(a, b, 301) if b > a else np.array([a])
         try:
-            resolve(stack, grid)
+            ls.check_stack(stack, grid)
             return grid
         except LayerstackError:
             continue

@@ -35,10 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from layerstack_jax._custom_types import RealLike
-from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LayerstackError, LayerstackWarning, Stack,
-                            ellipsometry, file_fields, fixed_optics, optics_fixed_at, reflectance)
-from layerstack_jax._stack import TabulatedSpectrum
+from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LayerstackError, LayerstackWarning, RealLike, Stack,
+                            TabulatedSpectrum, ellipsometry, file_fields, fixed_optics, optics_fixed_at, reflectance)
 
 from ._parameters import Layout, Parameter, is_instrument_path, resolve_parameter
 

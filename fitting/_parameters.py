@@ -52,9 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from layerstack_jax._custom_types import RealLike
-from layerstack_jax import Cauchy, Index, LayerstackError, Sellmeier, Stack, leaf_role_at
-from layerstack_jax._stack import as_spectrum
+from layerstack_jax import Cauchy, Index, LayerstackError, RealLike, Sellmeier, Stack, as_spectrum, leaf_role_at
 from layerstack_jax.io import FreeDeclaration, load_fit_stack
 
 __all__ = [

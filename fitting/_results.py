@@ -22,7 +22,7 @@ computation shared with :func:`~fitting.fit_batch`. This module turns them into 
   finding and every pair;
 * **structural degeneracies** — free parameters no data can separate by construction (an
   incoherent layer's thickness and α: only α·h enters Beer's law), with the advice to fix one
-  (:func:`fitting._cube.structural_degeneracy`, shared with :func:`~fitting.fit_cube`).
+  (:func:`structural_degeneracy`, shared with :func:`~fitting.fit_cube`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -122,7 +122,7 @@ def percent_warnings(objective: Objective, data: list) -> list:
 SIGN_FLIP_RATIO = 10.0
 
 
-def delta_sign_warnings(objective: Objective, options, args, chi2: float, dof: int) -> list:
+def delta_sign_warnings(objective: Objective, args, chi2: float, dof: int, refit: Optional[Callable]) -> list:
     """A plain warning when ellipsometric data probably carry the opposite Δ sign.
 
     Checked only when the fit has data odd in Δ (``Ellipsometric`` quantities Δ, S, Im ρ:
@@ -132,23 +132,17 @@ def delta_sign_warnings(objective: Objective, options, args, chi2: float, dof: i
     in the other Δ convention (Δ = arg(r_p/r_s) instead of the instruments' −arg(r_p/r_s) that the
     model reports). If that fit reaches a χ² at least :data:`SIGN_FLIP_RATIO` times smaller, the
     warning says so. Cost: one extra solve, only for such fits. ``args``: the fit's
-    ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom."""
+    ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom; ``refit(args)``:
+    the χ² the same fit reaches on other data (:func:`fitting._solve.refit_chi2`; None: no check)."""
     from scipy.special import chdtrc  # χ² sf (what scipy.stats.chi2.sf calls; lighter import)
 
     odd = [ds.colour is None and bool(getattr(ds.geometry, "odd_in_delta", False)) for ds in objective.datasets]
-    if not any(odd) or not objective.sigma_given or dof <= 0 or not np.isfinite(chi2):
+    if refit is None or not any(odd) or not objective.sigma_given or dof <= 0 or not np.isfinite(chi2):
         return []
     if not (chi2 / dof > 1.5 and chdtrc(dof, chi2) < IMPLAUSIBLE_P):
         return []
-    import jax.numpy as jnp
-
-    from ._solve import compiled_fit, starting_point  # here: _solve imports this module
-
     data, weight = args
-    mirrored = (tuple(-d if o else d for d, o in zip(data, odd)), weight)
-    start = jnp.asarray(starting_point(objective, options, objective.layout.x0))
-    out = compiled_fit(objective, options, batched=False)(start, mirrored, objective.optics)
-    flipped = float(sum(np.sum(np.asarray(r, float) ** 2) for r in out.residuals))
+    flipped = refit((tuple(-d if o else d for d, o in zip(data, odd)), weight))
     if not (np.isfinite(flipped) and flipped * SIGN_FLIP_RATIO <= chi2):
         return []
     which = ", ".join(ds.label for ds, o in zip(objective.datasets, odd) if o)
@@ -557,11 +551,21 @@ def _non_identifiable(layout, sv, rank, Vt, dirs, norms_zero) -> tuple[list, np.
 
 
 def structural_degeneracy(objective: Objective) -> list:
-    """The advice of :func:`fitting._cube.structural_degeneracy` (one helper for ``fit``, ``fit_cube``
-    and their commands): free parameters no data can separate by construction, and what to do."""
-    from ._cube import structural_degeneracy as advice  # here: _cube imports this module
-
-    return advice(objective)
+    """Degeneracies of ``objective`` by construction, known without computing anything: one
+    message per incoherent layer whose thickness and α are both free (only α·h enters Beer's
+    law, Simonot eq. 20: no data can separate them). A known value of either — one sample's
+    thickness in a series, one fixed α coefficient — breaks the trade-off α → kα, h → h/k: no
+    message then."""
+    free = {p.path for p in objective.layout.params if not np.any(p.fixed)}
+    out = []
+    for i, layer in enumerate(objective.stack.layers):
+        refs = (i, layer.name) if layer.name else (i,)
+        if not layer.coherent and any(("layers", r, "thickness") in free for r in refs) \
+                and any(("layers", r, "alpha") in free for r in refs):
+            label = layer.name or f"layers[{i}]"
+            out.append(f"{label}: thickness and alpha are both free, but an incoherent layer's spectra depend on "
+                       "them only through alpha·h (Beer's law): fix one of them (e.g. a known thickness)")
+    return out
 
 
 #: The report shows at most this many findings of each kind and this many pairs; the JSON has all.
@@ -665,10 +669,11 @@ def _plain_residuals(objective: Objective, model, data) -> list:
 
 def build_result(objective: Objective, options, out, args, *, scale_covariance, rank_rtol, starts=1,
                  starts_converged=None, note: str = "", stats=None, starts_abandoned=None,
-                 correlation_limit: float = CORRELATION_LIMIT) -> FitResult:
+                 correlation_limit: float = CORRELATION_LIMIT, refit: Optional[Callable] = None) -> FitResult:
     """:class:`FitResult` of one fit from its :class:`~fitting._solve.FitOutput` ``out``
     (NumPy, no batch axis) and data ``args``; ``stats``: its :class:`~fitting._statistics.FitStatistics`
-    when already computed (a row of a batch's), else computed here by the same function."""
+    when already computed (a row of a batch's), else computed here by the same function;
+    ``refit``: the same fit's χ² on other data, for :func:`delta_sign_warnings`."""
     layout = objective.layout
     x = np.asarray(out.x, float)
     code = int(out.status)
@@ -696,7 +701,7 @@ def build_result(objective: Objective, options, out, args, *, scale_covariance, 
     s = math.sqrt(chi2 / dof) if dof > 0 and np.isfinite(chi2) else math.nan
     verdict, warnings = quality_verdict(red, dof, objective.sigma_given, s)
     warnings = warnings + percent_warnings(objective, data)
-    warnings = warnings + delta_sign_warnings(objective, options, args, chi2, dof)
+    warnings = warnings + delta_sign_warnings(objective, args, chi2, dof, refit)
     at_bound = bounds_hit(layout, x)
     separated = not_separated(list(layout.names), stats.correlation, non_ident, correlation_limit)
     findings = separability_findings(layout, x, stats.covariance, stats.correlation, stats.unresolved,

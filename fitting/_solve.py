@@ -52,17 +52,16 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from layerstack_jax import LayerstackError
-from layerstack_jax._progress import reporter
-from layerstack_jax._validate import traced_checks_off
+from layerstack_jax import LayerstackError, progress_reporter, traced_checks_off
 
 from ._bounded import compiled_lbfgsb
 from ._objective import Objective
 from ._results import build_result
 from ._statistics import bound_contacts
-from ._structured import (STRUCTURE_MODES, CompressedJacobian, StructuredDampedNewtonDescent, block_distance,
-                          compressed_jacobian_function, sparse_jacobian_function, structure_for,
-                          structured_jacobian_with_statistics, structured_statistics_function)
+from ._structured import (STRUCTURE_MODES, CompressedJacobian, Structure, StructuredDampedNewtonDescent,
+                          block_distance, compressed_jacobian_function, find_structure, sparse_jacobian_function,
+                          structured_jacobian_with_statistics, structured_statistics_function, verify_structure,
+                          with_args_tangent)
 from ._watchdog import wait_for
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
@@ -88,7 +87,7 @@ class SolverOptions:
     rule off, leaving optimistix's step and cost test alone); ``structure``: the Jacobian's
     form (:data:`fitting._structured.STRUCTURE_MODES`) — ``"auto"`` uses the compressed,
     block-structured Jacobian of spectral parameters free per wavelength where it pays
-    (:func:`fitting._structured.structure_for`), ``"dense"`` never, ``"structured"`` always
+    (:func:`structure_for`), ``"dense"`` never, ``"structured"`` always
     (an error where the fit has no such structure).
     """
 
@@ -424,7 +423,7 @@ def jacobian_with_statistics(objective: Objective, structure=None):
         r, aux = evaluate(u, args_optics)
         J = aux[1]
         out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ (jax.jacfwd(z_of)(u) @ du)
-        out = _with_args_tangent(out, lambda a: parts(z_of(u), *a)[0], args_optics, dargs)
+        out = with_args_tangent(out, lambda a: parts(z_of(u), *a)[0], args_optics, dargs)
         return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
 
     g.defjvp(g_jvp, symbolic_zeros=True)
@@ -447,18 +446,6 @@ def _traced_once(jitted: Callable) -> Callable:
             return jitted(*args)
 
     return call
-
-
-def _with_args_tangent(out, of_args: Callable, args, dargs):
-    """``out`` plus the exact JVP of ``of_args`` at ``args`` along ``dargs`` (symbolic zeros
-    among them made concrete), or ``out`` itself when every tangent of ``args`` is a symbolic
-    zero (always, in the solvers): the ``args`` part of the custom JVPs of
-    :func:`jacobian_with_statistics` and :func:`dense_jacobian`."""
-    is_zero = lambda t: isinstance(t, SymbolicZero)  # noqa: E731
-    if all(is_zero(t) for t in jax.tree.leaves(dargs, is_leaf=is_zero)):
-        return out
-    dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if is_zero(t) else t, dargs, args, is_leaf=is_zero)
-    return out + jax.jvp(of_args, (args,), (dargs,))[1]
 
 
 def dense_jacobian(fn):
@@ -484,7 +471,7 @@ def dense_jacobian(fn):
 
         J, r = jax.jacfwd(value_twice, has_aux=True)(u)
         out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ du
-        return r, _with_args_tangent(out, lambda a: fn(u, a), args, dargs)
+        return r, with_args_tangent(out, lambda a: fn(u, a), args, dargs)
 
     g.defjvp(g_jvp, symbolic_zeros=True)
     return g
@@ -496,6 +483,46 @@ def starting_point(objective: Objective, o: SolverOptions, x0) -> np.ndarray:
     if o.method in ("lbfgsb", "trf"):
         return np.asarray(x0, float) / layout.scale
     return layout.to_unconstrained(x0)
+
+
+def structure_for(objective, mode: str, method: str) -> Optional[Structure]:
+    """The :class:`Structure` a fit of ``objective`` uses under ``mode``
+    (:data:`STRUCTURE_MODES`), found and verified once and cached on the objective; None for
+    the dense path. ``"auto"`` takes it when it exists and the compressed tangents are at most
+    half the components (``g + b ≤ P/2``): below that the dense Jacobian is as cheap.
+    ``"structured"`` raises :class:`LayerstackError` saying why when there is none."""
+    if mode not in STRUCTURE_MODES:
+        raise LayerstackError(f"structure must be one of {STRUCTURE_MODES}, got {mode!r}")
+    if mode == "dense":
+        return None
+    cache = compiled_cache(objective)
+    if "structure" not in cache:
+        cache["structure"] = find_structure(objective)
+    st, why = cache["structure"]
+    if st is None or (mode == "auto" and 2 * st.tangents > st.P):
+        if mode == "structured":
+            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
+        return None
+    if "structure_checked" not in cache:  # once, and only where it would be used
+        ok, why = verify_structure(objective, st, _residuals_and_parts(objective))
+        cache["structure_checked"] = (ok, why)
+    ok, why = cache["structure_checked"]
+    if not ok:
+        if mode == "structured":
+            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
+        return None
+    return st
+
+
+# --------------------------------------------------------------------------- the solve
+
+
+def refit_chi2(objective: Objective, o: SolverOptions, args) -> float:
+    """χ² that the compiled fit of ``objective`` (the same program: no new compilation) reaches
+    from the parameters' starting values on data ``args`` = ``(data, weight)``."""
+    start = jnp.asarray(starting_point(objective, o, objective.layout.x0))
+    out = compiled_fit(objective, o, batched=False)(start, args, objective.optics)
+    return float(sum(np.sum(np.asarray(r, float) ** 2) for r in out.residuals))
 
 
 def _residuals_and_parts(objective: Objective):
@@ -899,11 +926,11 @@ def _multistart(objective: Objective, o: SolverOptions, y0, args, progress) -> F
     converged so far (:func:`give_up_rule`; Levenberg–Marquardt). On a CPU that is also the
     fastest order: a vmapped block of starts costs per start about twice a single solve's step
     and runs until its slowest start ends (benchmark E1). ``progress`` as
-    :func:`layerstack_jax._progress.reporter` (by default a bar above :data:`STARTS_PER_CALL`
+    :func:`layerstack_jax.progress_reporter` (by default a bar above :data:`STARTS_PER_CALL`
     starts). NumPy output, one row per start."""
     n = y0.shape[0]
     fn = compiled_fit(objective, o, batched=False)
-    update = reporter(progress, n, desc="multi-start", unit="start", auto=n > STARTS_PER_CALL)
+    update = progress_reporter(progress, n, desc="multi-start", unit="start", auto=n > STARTS_PER_CALL)
     outs = []
     best_cost, best_steps = math.inf, 0
     for i in range(n):
@@ -1017,4 +1044,4 @@ def fit(objective: Objective, method: str = "lm", *, data=None, x0=None, starts:
     return build_result(objective, o, out, args, scale_covariance=scale_covariance, rank_rtol=rank_rtol,
                         starts=starts, starts_converged=n_starts_converged, starts_abandoned=n_abandoned,
                         note=bound_note(method, names, bool(settled[best]), int(finished[best])),
-                        correlation_limit=correlation_limit)
+                        correlation_limit=correlation_limit, refit=functools.partial(refit_chi2, objective, o))

@@ -26,8 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._structured import CompressedJacobian, structured_covariance
-from ._structured import zero_columns as compressed_zero_columns
+from ._structured import CompressedJacobian, dense_of
 
 __all__ = [
     "FitStatistics",
@@ -161,7 +160,7 @@ def fit_statistics(J, x, data_residuals, layout, n_points: int, *, sigma_given: 
                    rank_rtol: float = 1e-8) -> FitStatistics:
     """All statistics of fits with Jacobians ``J`` ``(..., M, P)`` (w.r.t. ``x / layout.scale``;
     or a :class:`~fitting._structured.CompressedJacobian`, whose covariance is the structured
-    inverse, :func:`~fitting._structured.structured_covariance`)
+    inverse, :func:`structured_covariance`)
     at solutions ``x`` ``(..., P)``; ``data_residuals``: the weighted data residuals, one array
     ``(..., samples, wl)`` per dataset (0 at masked points); ``n_points`` the used data points.
 
@@ -397,3 +396,117 @@ def separability_summary(per_fit: list, limit: float = CORRELATION_LIMIT, at_mos
             break
         lines.append(f"  {n} fit(s): {kind} (|ρ| > {limit:g}): {', '.join(params)} — e.g. {example}")
     return lines
+
+
+def _np_qr_r(a):
+    return np.linalg.qr(a, mode="r")
+
+
+def structured_covariance(J: CompressedJacobian, x, scale, rank_rtol: float):
+    """:func:`linearised_covariance` for a Jacobian in compressed form
+    (module docstring): ``(cov, singular_values, rank, null_vectors, log_directions)`` with
+    optional leading batch axes, the same normalisation (columns w.r.t. :math:`\\ln x`, unit
+    length) and the same covariance.
+
+    ``singular_values`` are those of the block pivots :math:`R_w` and :math:`R_g` of the
+    normalised Jacobian (sorted; the same rank in exact arithmetic as the singular values of the
+    whole, which they bound). Fits with full rank get zero ``null_vectors`` and
+    ``log_directions`` (there is no null direction); fits below full rank (or with a
+    non-finite Jacobian) get the dense analysis of their decompressed Jacobian."""
+    st = J.structure
+    K = np.asarray(J.K, float)
+    x = np.asarray(x, float)
+    scale = np.asarray(scale, float)
+    lead = x.shape[:-1]
+    P, g, b, W = st.P, st.g, st.b, st.W
+    K = K.reshape((-1,) + K.shape[-2:])
+    xs = x.reshape(-1, P)
+    N = K.shape[0]
+    rel = np.where(xs != 0, np.abs(xs) / scale, 1.0)  # (N, P)
+    Kb = K[:, st.block_rows]  # (N, W, k, T)
+    norms = np.zeros((N, P + 1))
+    norms[:, st.global_index] = np.linalg.norm(K[:, :, :g], axis=1)
+    norms[:, st.spectral_index] = np.linalg.norm(Kb[..., g:], axis=2)  # absent ones land in the dummy
+    norms = norms[:, :P] * rel
+    safe = np.where(norms > 0, norms, 1.0)
+    a = rel / safe  # J_normalised = J diag(a)
+    a_ext = np.concatenate([a, np.zeros((N, 1))], axis=1)
+    present = st.present
+    Js = Kb[..., g:] * a_ext[:, st.spectral_index][:, :, None, :]  # (N, W, k, b)
+    Jg = Kb[..., :g] * a[:, None, None, st.global_index]
+    bad = ~(np.all(np.isfinite(Js), axis=(1, 2, 3)) & np.all(np.isfinite(Jg), axis=(1, 2, 3))
+            & np.all(np.isfinite(K), axis=(1, 2)))
+    Js = np.where(bad[:, None, None, None], 0.0, Js)
+    Jg = np.where(bad[:, None, None, None], 0.0, Jg)
+    unit = np.broadcast_to(np.eye(b) * ~present[:, None, :], (N, W, b, b))  # absent values: decoupled unit rows
+    blocks = np.concatenate([np.concatenate([Js, Jg], axis=-1),
+                             np.concatenate([unit, np.zeros((N, W, b, g))], axis=-1)], axis=-2)
+    R = _np_qr_r(blocks)  # (N, W, min(k + b, b + g), b + g)
+    Rs, G = R[..., :b, :b], R[..., :b, b:]
+    sv_blocks = np.linalg.svd(Rs * present[None, :, :, None] * present[None, :, None, :], compute_uv=False)
+    if g:
+        H = R[..., b:, b:].reshape(N, -1, g)
+        Jg0 = K[:, st.global_rows, :g] * a[:, None, st.global_index]
+        Jg0 = np.where(bad[:, None, None], 0.0, Jg0)
+        Rg = _np_qr_r(np.concatenate([H, Jg0], axis=1))[:, :g]  # (N, g, g)
+        if Rg.shape[1] < g:  # fewer rows than globals: rank deficient
+            Rg = np.concatenate([Rg, np.zeros((N, g - Rg.shape[1], g))], axis=1)
+        sv_g = np.linalg.svd(Rg, compute_uv=False)
+    else:
+        Rg = np.zeros((N, 0, 0))
+        sv_g = np.zeros((N, 0))
+    absent = int((~present).sum())
+    sv = np.sort(np.concatenate([sv_blocks.reshape(N, -1), sv_g], axis=1), axis=1)[:, ::-1]
+    sv = sv[:, :sv.shape[1] - absent]  # the zeros of the absent values
+    top = sv[:, :1]
+    keep = (sv > rank_rtol * top) & (top > 0)
+    rank = keep.sum(axis=1)
+    full = (rank == P) & ~bad
+    cov = np.full((N, P, P), np.nan)
+    if full.any():
+        f = np.nonzero(full)[0]
+        n = f.size
+        S = W * b  # block order: the spectral values wavelength by wavelength, then the globals
+        Rs_inv = np.linalg.solve(Rs[f], np.broadcast_to(np.eye(b), Rs[f].shape))  # (n, W, b, b)
+        Rs_inv = Rs_inv * present[None, :, :, None] * present[None, :, None, :]  # absent values: out
+        B = np.zeros((n, S + g, S + g))
+        if g:
+            Rg_inv = np.linalg.solve(Rg[f], np.broadcast_to(np.eye(g), Rg[f].shape))
+            Wm = (Rs_inv @ G[f] @ Rg_inv[:, None]).reshape(n, S, g)  # W_w = R_w^-1 G_w R_g^-1
+            B[:, :S, :S] = Wm @ np.swapaxes(Wm, -1, -2)
+            B[:, :S, S:] = -(Wm @ np.swapaxes(Rg_inv, -1, -2))
+            B[:, S:, :S] = np.swapaxes(B[:, :S, S:], -1, -2)
+            B[:, S:, S:] = Rg_inv @ np.swapaxes(Rg_inv, -1, -2)
+        diag = B[:, :S, :S].reshape(n, W, b, W, b)  # a view: add blockdiag(R_w^-1 R_w^-T)
+        w = np.arange(W)
+        diag[:, w, :, w, :] += np.moveaxis(Rs_inv @ np.swapaxes(Rs_inv, -1, -2), 1, 0)
+        pos = np.empty(P, int)  # free component -> its place in block order
+        sflat = st.spectral_index.ravel()
+        pos[sflat[sflat < P]] = np.flatnonzero(sflat < P)
+        pos[st.global_index] = S + np.arange(g)
+        cn = np.take(np.take(B, pos, axis=1), pos, axis=2)
+        s = a[f] * scale
+        cov[f] = cn * s[:, :, None] * s[:, None, :]
+    Vt = np.zeros((N, P, P))
+    dirs = np.zeros((N, P, P))
+    sv_out = np.where(bad[:, None], np.nan, sv)
+    rank = np.where(bad, P, rank)
+    rest = np.nonzero(~full)[0]
+    if rest.size:  # a direction the data do not determine (or a non-finite Jacobian): the dense analysis names it
+        Jd = dense_of(K[rest], st)
+        c2, sv2, rank2, Vt2, dirs2 = linearised_covariance(Jd, xs[rest], scale, rank_rtol)
+        cov[rest], sv_out[rest], rank[rest], Vt[rest], dirs[rest] = c2, sv2, rank2, Vt2, dirs2
+    return (cov.reshape(lead + (P, P)), sv_out.reshape(lead + (P,)), rank.reshape(lead),
+            Vt.reshape(lead + (P, P)), dirs.reshape(lead + (P, P)))
+
+
+def compressed_zero_columns(J: CompressedJacobian) -> np.ndarray:
+    """``(..., P)`` True where the dense Jacobian's column is zero."""
+    st = J.structure
+    K = np.asarray(J.K, float)
+    lead = K.shape[:-2]
+    n = np.zeros(lead + (st.P + 1,))
+    n[..., st.global_index] = np.linalg.norm(K[..., :st.g], axis=-2)
+    Kb = K[..., st.block_rows, st.g:]  # (..., W, k, b)
+    n[..., st.spectral_index] = np.linalg.norm(Kb, axis=-2)
+    return n[..., :st.P] == 0

@@ -43,7 +43,7 @@ not squared as in the normal equations). Cost per step: ``W`` QRs of ``(k + b) �
 and one of ``≈ W min(k, g+1) × (g + 1)`` — linear in the number of wavelengths.
 
 **Covariance.** With the same factorisation of the column-normalised Jacobian
-(:func:`structured_covariance`), :math:`R = \begin{pmatrix} R_s & G\\ 0 & R_g\end{pmatrix}`
+(:func:`fitting._statistics.structured_covariance`), :math:`R = \begin{pmatrix} R_s & G\\ 0 & R_g\end{pmatrix}`
 (:math:`R_s` block-diagonal) and :math:`C = (J^\top J)^{-1} = R^{-1}R^{-\top}`:
 :math:`C_{gg} = R_g^{-1}R_g^{-\top}`, :math:`C_{sg} = -W R_g^{-\top}`,
 :math:`C_{ss} = \operatorname{blockdiag}(R_w^{-1}R_w^{-\top}) + W W^\top` with
@@ -55,7 +55,7 @@ direction the data do not determine) gets the dense SVD analysis of
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import equinox as eqx
 import jax
@@ -64,13 +64,12 @@ import numpy as np
 import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 
-from layerstack_jax import LayerstackError
-from layerstack_jax._validate import traced_checks_off
+from layerstack_jax import traced_checks_off
 
-__all__ = ["Structure", "CompressedJacobian", "find_structure", "verify_structure", "structure_for",
-           "STRUCTURE_MODES", "StructuredDampedNewtonDescent", "structured_jacobian_with_statistics",
-           "structured_statistics_function", "structured_covariance", "damped_block_solve", "dense_of",
-           "compressed_jacobian_function", "sparse_jacobian_function"]
+__all__ = ["Structure", "CompressedJacobian", "find_structure", "verify_structure", "STRUCTURE_MODES",
+           "StructuredDampedNewtonDescent", "structured_jacobian_with_statistics", "structured_statistics_function",
+           "damped_block_solve", "dense_of", "compressed_jacobian_function", "sparse_jacobian_function",
+           "with_args_tangent"]
 
 #: ``structure=`` of :func:`~fitting.fit`: choose, always the dense Jacobian, or insist on the structured one.
 STRUCTURE_MODES = ("auto", "dense", "structured")
@@ -271,38 +270,6 @@ def verify_structure(objective, st: Structure, residuals_and_parts) -> tuple[boo
     return True, ""
 
 
-def structure_for(objective, mode: str, method: str) -> Optional[Structure]:
-    """The :class:`Structure` a fit of ``objective`` uses under ``mode``
-    (:data:`STRUCTURE_MODES`), found and verified once and cached on the objective; None for
-    the dense path. ``"auto"`` takes it when it exists and the compressed tangents are at most
-    half the components (``g + b ≤ P/2``): below that the dense Jacobian is as cheap.
-    ``"structured"`` raises :class:`LayerstackError` saying why when there is none."""
-    if mode not in STRUCTURE_MODES:
-        raise LayerstackError(f"structure must be one of {STRUCTURE_MODES}, got {mode!r}")
-    if mode == "dense":
-        return None
-    from ._solve import _residuals_and_parts, compiled_cache  # here: _solve imports this module
-
-    cache = compiled_cache(objective)
-    if "structure" not in cache:
-        cache["structure"] = find_structure(objective)
-    st, why = cache["structure"]
-    if st is None or (mode == "auto" and 2 * st.tangents > st.P):
-        if mode == "structured":
-            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
-        return None
-    if "structure_checked" not in cache:  # once, and only where it would be used
-        ok, why = verify_structure(objective, st, _residuals_and_parts(objective))
-        cache["structure_checked"] = (ok, why)
-    ok, why = cache["structure_checked"]
-    if not ok:
-        if mode == "structured":
-            raise LayerstackError(f"structure='structured': this fit's Jacobian has no block structure: {why}")
-        return None
-    return st
-
-
-# --------------------------------------------------------------------------- the solve
 def _qr_r(a):
     return jnp.linalg.qr(a, mode="r")
 
@@ -432,6 +399,19 @@ def block_distance(descent_state, structure: Structure):
 
 
 # --------------------------------------------------------------------------- residual functions
+def with_args_tangent(out, of_args: Callable, args, dargs):
+    """``out`` plus the exact JVP of ``of_args`` at ``args`` along ``dargs`` (symbolic zeros
+    among them made concrete), or ``out`` itself when every tangent of ``args`` is a symbolic
+    zero (always, in the solvers): the ``args`` part of the custom JVPs of
+    :func:`fitting._solve.jacobian_with_statistics`, :func:`fitting._solve.dense_jacobian` and
+    :func:`structured_jacobian_with_statistics`."""
+    is_zero = lambda t: isinstance(t, SymbolicZero)  # noqa: E731
+    if all(is_zero(t) for t in jax.tree.leaves(dargs, is_leaf=is_zero)):
+        return out
+    dargs = jax.tree.map(lambda t, a: jnp.zeros_like(a) if is_zero(t) else t, dargs, args, is_leaf=is_zero)
+    return out + jax.jvp(of_args, (args,), (dargs,))[1]
+
+
 def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_parts, z_of, traced_once):
     r""":func:`fitting._solve.jacobian_with_statistics` with the Jacobian formed in compressed
     form (``g + b`` tangents, :func:`_compressed_jacobian`) and applied by
@@ -454,8 +434,6 @@ def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_
         return evaluate(u, args_optics)
 
     def g_jvp(primals, tangents):
-        from ._solve import _with_args_tangent
-
         u, args_optics = primals
         du, dargs = tangents
         r, aux = evaluate(u, args_optics)
@@ -464,7 +442,7 @@ def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_
             out = jnp.zeros_like(r)
         else:
             out = apply_compressed(K, st, jax.jvp(z_of, (u,), (du,))[1])  # z(u) acts componentwise
-        out = _with_args_tangent(out, lambda a: residuals_and_parts(z_of(u), *a)[0], args_optics, dargs)
+        out = with_args_tangent(out, lambda a: residuals_and_parts(z_of(u), *a)[0], args_optics, dargs)
         return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
 
     g.defjvp(g_jvp, symbolic_zeros=True)
@@ -514,117 +492,3 @@ def sparse_jacobian_function(compressed, st: Structure):
 
 
 # --------------------------------------------------------------------------- covariance
-def _np_qr_r(a):
-    return np.linalg.qr(a, mode="r")
-
-
-def structured_covariance(J: CompressedJacobian, x, scale, rank_rtol: float):
-    """:func:`fitting._statistics.linearised_covariance` for a Jacobian in compressed form
-    (module docstring): ``(cov, singular_values, rank, null_vectors, log_directions)`` with
-    optional leading batch axes, the same normalisation (columns w.r.t. :math:`\\ln x`, unit
-    length) and the same covariance.
-
-    ``singular_values`` are those of the block pivots :math:`R_w` and :math:`R_g` of the
-    normalised Jacobian (sorted; the same rank in exact arithmetic as the singular values of the
-    whole, which they bound). Fits with full rank get zero ``null_vectors`` and
-    ``log_directions`` (there is no null direction); fits below full rank (or with a
-    non-finite Jacobian) get the dense analysis of their decompressed Jacobian."""
-    from ._statistics import linearised_covariance
-
-    st = J.structure
-    K = np.asarray(J.K, float)
-    x = np.asarray(x, float)
-    scale = np.asarray(scale, float)
-    lead = x.shape[:-1]
-    P, g, b, W = st.P, st.g, st.b, st.W
-    K = K.reshape((-1,) + K.shape[-2:])
-    xs = x.reshape(-1, P)
-    N = K.shape[0]
-    rel = np.where(xs != 0, np.abs(xs) / scale, 1.0)  # (N, P)
-    Kb = K[:, st.block_rows]  # (N, W, k, T)
-    norms = np.zeros((N, P + 1))
-    norms[:, st.global_index] = np.linalg.norm(K[:, :, :g], axis=1)
-    norms[:, st.spectral_index] = np.linalg.norm(Kb[..., g:], axis=2)  # absent ones land in the dummy
-    norms = norms[:, :P] * rel
-    safe = np.where(norms > 0, norms, 1.0)
-    a = rel / safe  # J_normalised = J diag(a)
-    a_ext = np.concatenate([a, np.zeros((N, 1))], axis=1)
-    present = st.present
-    Js = Kb[..., g:] * a_ext[:, st.spectral_index][:, :, None, :]  # (N, W, k, b)
-    Jg = Kb[..., :g] * a[:, None, None, st.global_index]
-    bad = ~(np.all(np.isfinite(Js), axis=(1, 2, 3)) & np.all(np.isfinite(Jg), axis=(1, 2, 3))
-            & np.all(np.isfinite(K), axis=(1, 2)))
-    Js = np.where(bad[:, None, None, None], 0.0, Js)
-    Jg = np.where(bad[:, None, None, None], 0.0, Jg)
-    unit = np.broadcast_to(np.eye(b) * ~present[:, None, :], (N, W, b, b))  # absent values: decoupled unit rows
-    blocks = np.concatenate([np.concatenate([Js, Jg], axis=-1),
-                             np.concatenate([unit, np.zeros((N, W, b, g))], axis=-1)], axis=-2)
-    R = _np_qr_r(blocks)  # (N, W, min(k + b, b + g), b + g)
-    Rs, G = R[..., :b, :b], R[..., :b, b:]
-    sv_blocks = np.linalg.svd(Rs * present[None, :, :, None] * present[None, :, None, :], compute_uv=False)
-    if g:
-        H = R[..., b:, b:].reshape(N, -1, g)
-        Jg0 = K[:, st.global_rows, :g] * a[:, None, st.global_index]
-        Jg0 = np.where(bad[:, None, None], 0.0, Jg0)
-        Rg = _np_qr_r(np.concatenate([H, Jg0], axis=1))[:, :g]  # (N, g, g)
-        if Rg.shape[1] < g:  # fewer rows than globals: rank deficient
-            Rg = np.concatenate([Rg, np.zeros((N, g - Rg.shape[1], g))], axis=1)
-        sv_g = np.linalg.svd(Rg, compute_uv=False)
-    else:
-        Rg = np.zeros((N, 0, 0))
-        sv_g = np.zeros((N, 0))
-    absent = int((~present).sum())
-    sv = np.sort(np.concatenate([sv_blocks.reshape(N, -1), sv_g], axis=1), axis=1)[:, ::-1]
-    sv = sv[:, :sv.shape[1] - absent]  # the zeros of the absent values
-    top = sv[:, :1]
-    keep = (sv > rank_rtol * top) & (top > 0)
-    rank = keep.sum(axis=1)
-    full = (rank == P) & ~bad
-    cov = np.full((N, P, P), np.nan)
-    if full.any():
-        f = np.nonzero(full)[0]
-        n = f.size
-        S = W * b  # block order: the spectral values wavelength by wavelength, then the globals
-        Rs_inv = np.linalg.solve(Rs[f], np.broadcast_to(np.eye(b), Rs[f].shape))  # (n, W, b, b)
-        Rs_inv = Rs_inv * present[None, :, :, None] * present[None, :, None, :]  # absent values: out
-        B = np.zeros((n, S + g, S + g))
-        if g:
-            Rg_inv = np.linalg.solve(Rg[f], np.broadcast_to(np.eye(g), Rg[f].shape))
-            Wm = (Rs_inv @ G[f] @ Rg_inv[:, None]).reshape(n, S, g)  # W_w = R_w^-1 G_w R_g^-1
-            B[:, :S, :S] = Wm @ np.swapaxes(Wm, -1, -2)
-            B[:, :S, S:] = -(Wm @ np.swapaxes(Rg_inv, -1, -2))
-            B[:, S:, :S] = np.swapaxes(B[:, :S, S:], -1, -2)
-            B[:, S:, S:] = Rg_inv @ np.swapaxes(Rg_inv, -1, -2)
-        diag = B[:, :S, :S].reshape(n, W, b, W, b)  # a view: add blockdiag(R_w^-1 R_w^-T)
-        w = np.arange(W)
-        diag[:, w, :, w, :] += np.moveaxis(Rs_inv @ np.swapaxes(Rs_inv, -1, -2), 1, 0)
-        pos = np.empty(P, int)  # free component -> its place in block order
-        sflat = st.spectral_index.ravel()
-        pos[sflat[sflat < P]] = np.flatnonzero(sflat < P)
-        pos[st.global_index] = S + np.arange(g)
-        cn = np.take(np.take(B, pos, axis=1), pos, axis=2)
-        s = a[f] * scale
-        cov[f] = cn * s[:, :, None] * s[:, None, :]
-    Vt = np.zeros((N, P, P))
-    dirs = np.zeros((N, P, P))
-    sv_out = np.where(bad[:, None], np.nan, sv)
-    rank = np.where(bad, P, rank)
-    rest = np.nonzero(~full)[0]
-    if rest.size:  # a direction the data do not determine (or a non-finite Jacobian): the dense analysis names it
-        Jd = dense_of(K[rest], st)
-        c2, sv2, rank2, Vt2, dirs2 = linearised_covariance(Jd, xs[rest], scale, rank_rtol)
-        cov[rest], sv_out[rest], rank[rest], Vt[rest], dirs[rest] = c2, sv2, rank2, Vt2, dirs2
-    return (cov.reshape(lead + (P, P)), sv_out.reshape(lead + (P,)), rank.reshape(lead),
-            Vt.reshape(lead + (P, P)), dirs.reshape(lead + (P, P)))
-
-
-def zero_columns(J: CompressedJacobian) -> np.ndarray:
-    """``(..., P)`` True where the dense Jacobian's column is zero."""
-    st = J.structure
-    K = np.asarray(J.K, float)
-    lead = K.shape[:-2]
-    n = np.zeros(lead + (st.P + 1,))
-    n[..., st.global_index] = np.linalg.norm(K[..., :st.g], axis=-2)
-    Kb = K[..., st.block_rows, st.g:]  # (..., W, k, b)
-    n[..., st.spectral_index] = np.linalg.norm(Kb, axis=-2)
-    return n[..., :st.P] == 0

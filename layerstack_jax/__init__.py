@@ -11,6 +11,7 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
+from ._batched import MEMORY_FRACTION as MEMORY_FRACTION
 from ._batched import MemoryBudget as MemoryBudget
 from ._batched import memory_budget as memory_budget
 from ._batched import predict as predict
@@ -26,6 +27,7 @@ from ._colour import xyz_to_lab as xyz_to_lab
 from ._colour import xyz_to_xyy as xyz_to_xyy
 from ._cubes import as_cube as as_cube
 from ._cubes import open_cube as open_cube
+from ._custom_types import RealLike as RealLike
 from ._cubes import read_envi as read_envi
 from ._cubes import read_netcdf as read_netcdf
 from ._cubes import read_npy as read_npy
@@ -119,9 +121,12 @@ from ._stack import Layer as Layer
 from ._stack import Stack as Stack
 from ._stack import Substrate as Substrate
 from ._stack import TabulatedSpectrum as TabulatedSpectrum
+from ._stack import as_spectrum as as_spectrum
 from ._stack import check_stack as check_stack
+from ._progress import reporter as progress_reporter
 from ._validate import LayerstackError as LayerstackError
 from ._validate import LayerstackWarning as LayerstackWarning
+from ._validate import traced_checks_off as traced_checks_off
 from .io import Measurement as Measurement
 from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack
@@ -138,6 +143,7 @@ from .io import write_measurement_csv as write_measurement_csv
 __all__ = [
     "apply_mueller",
     "as_cube",
+    "as_spectrum",
     "BRDF",
     "Bruggeman",
     "Cauchy",
@@ -150,22 +156,22 @@ __all__ = [
     "CoatingTables",
     "CodyLorentz",
     "coherency_matrix",
-    "compilation_cache_dir",
     "ColourSpace",
+    "compilation_cache_dir",
     "database_version",
     "DatabaseFormula",
     "DEFAULT_NODES",
     "degree_of_polarization",
     "delta_e_2000",
     "delta_e_ab",
-    "Diffuse",
     "diffuse",
+    "Diffuse",
     "diffuse_mueller",
     "Directional",
     "Drude",
     "Ellipsometric",
-    "Ellipsometry",
     "ellipsometry",
+    "Ellipsometry",
     "ExitMedium",
     "file_fields",
     "fixed_optics",
@@ -187,32 +193,33 @@ __all__ = [
     "km_transmittance",
     "KubelkaMunk",
     "LambertianBackground",
-    "layered",
     "Layer",
-    "leaf",
-    "Leaf",
-    "leaf_role_at",
-    "LeafRole",
+    "layered",
     "LayerstackError",
     "LayerstackWarning",
+    "Leaf",
+    "leaf",
+    "leaf_role_at",
+    "LeafRole",
     "load_fit_stack",
     "load_stack",
     "Looyenga",
     "Lorentz",
-    "Material",
     "material",
+    "Material",
     "material_sources",
     "Measurement",
-    "MemoryBudget",
     "memory_budget",
+    "MEMORY_FRACTION",
+    "MemoryBudget",
     "microfacet_distribution",
     "Mixture",
     "mueller_from_jones",
     "normal_wavevector",
-    "optics_fixed_at",
     "OBSERVERS",
     "open_cube",
     "Optics",
+    "optics_fixed_at",
     "Paint",
     "PaintLayer",
     "parse_geometry",
@@ -220,6 +227,7 @@ __all__ = [
     "photon_energy",
     "polarized_brdf",
     "predict",
+    "progress_reporter",
     "psi_delta",
     "read_csv_columns",
     "read_envi",
@@ -228,6 +236,7 @@ __all__ = [
     "read_npy",
     "read_spectra_csv",
     "read_zarr",
+    "RealLike",
     "reflectance",
     "reflection_amplitudes",
     "replace_at",
@@ -253,6 +262,7 @@ __all__ = [
     "Tabulated",
     "TabulatedSpectrum",
     "TaucLorentz",
+    "traced_checks_off",
     "use_compilation_cache",
     "VISIBLE_RANGE_NM",
     "write_measurement_csv",

@@ -7,7 +7,7 @@ thicknesses, α(λ) and ρg(λ) computes the complex Fresnel algebra once. Made 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 import equinox as eqx
 
@@ -16,9 +16,6 @@ from ._quadrature import DEFAULT_NODES
 from ._response import Interfaces
 from ._stack import ResolvedStack
 from ._validate import LayerstackError, check_agree
-
-if TYPE_CHECKING:  # _geometry imports this module: the annotation only, no import at run time
-    from ._geometry import Geometry
 
 __all__ = ["Optics", "check_optics", "coherent_films"]
 
@@ -46,7 +43,7 @@ class Optics(eqx.Module):
     are dimensionless (amplitude and intensity ratios; μ = sin²θ nodes and weights).
     """
 
-    geometry: Geometry  # the Geometry it was made for
+    geometry: eqx.Module  # the layerstack_jax.Geometry it was made for (which builds its Optics)
     incidence: Optional[Interfaces]
     viewing: Optional[Interfaces]
     diffuse: Optional[Interfaces]

@@ -2,8 +2,11 @@
 
 * nothing under ``layerstack_jax/`` imports ``fitting`` or ``layerstack_cli``; nothing under
   ``fitting/`` imports ``layerstack_cli``;
-* no import cycle among the module-level imports of ``layerstack_jax``, ``fitting``,
-  ``layerstack_cli`` and ``benchmarks``;
+* ``fitting`` and ``layerstack_cli`` use ``layerstack_jax`` through its public names only (no
+  ``layerstack_jax._module``, no ``_name``);
+* no import cycle among the imports of ``layerstack_jax``, ``fitting``, ``layerstack_cli`` and
+  ``benchmarks`` — module-level, inside functions and under ``TYPE_CHECKING`` alike (an import
+  deferred into a function still ties two concepts together);
 * no ``isinstance`` on a concrete geometry class outside the module that defines it;
 * no access to private attributes of optimistix, equinox or jaxopt.
 """
@@ -59,11 +62,67 @@ def test_dependencies_point_one_way(package, forbidden):
     assert not bad, "\n".join(bad)
 
 
+def _private_uses_of_layerstack_jax(source: str, where: str) -> list[str]:
+    """Where the module ``source`` (named ``where`` in the findings) reaches into
+    ``layerstack_jax``'s private modules or names: imports of ``layerstack_jax._…`` (or of a
+    ``_name`` from it) and attributes ``ls._…`` of the package."""
+    tree = ast.parse(source)
+    aliases, bad = set(), []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "layerstack_jax":
+                    aliases.add(a.asname or a.name)
+                    if any(part.startswith("_") for part in a.name.split(".")[1:]):
+                        bad.append(f"{where}:{node.lineno} import {a.name}")
+        elif isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] == "layerstack_jax":
+            parts = node.module.split(".")[1:]
+            names = [a.name for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+            if any(part.startswith("_") for part in parts) or names:
+                bad.append(f"{where}:{node.lineno} from {node.module} import "
+                           + ", ".join(a.name for a in node.names))
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                and node.attr.startswith("_") and not node.attr.startswith("__")):
+            bad.append(f"{where}:{node.lineno} {node.value.id}.{node.attr}")
+    return bad
+
+
+@pytest.mark.parametrize("package", ["fitting", "layerstack_cli"])
+def test_fitting_and_cli_use_public_physics_only(package):
+    """The fitting layer and the command line are clients of the physics like any user's code:
+    every name they take from ``layerstack_jax`` is public (``__all__`` of the package or of a
+    public submodule such as ``layerstack_jax.io``)."""
+    import importlib
+
+    bad = [b for path in _modules(package).values()
+           for b in _private_uses_of_layerstack_jax(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))]
+    assert not bad, "\n".join(bad)
+    for path in _modules(package).values():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").startswith("layerstack_jax"):
+                public = set(getattr(importlib.import_module(node.module), "__all__", ()))
+                for a in node.names:
+                    if a.name != "__version__" and public and a.name not in public:
+                        bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {a.name} is not in {node.module}.__all__")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_private_use_check_can_fail():
+    """The check above finds each form of reaching into the physics' internals."""
+    source = ("import layerstack_jax as ls\nfrom layerstack_jax._stack import resolve\n"
+              "from layerstack_jax import _batched, Stack\nimport layerstack_jax._progress\nls._validate.warn_if\n"
+              "from layerstack_jax import Stack\nfrom layerstack_jax.io import load_stack\nls.Stack\n")
+    found = _private_uses_of_layerstack_jax(source, "probe")
+    assert [f.split(":")[1].split()[0] for f in found] == ["2", "3", "4", "5"], found
+
+
 def test_no_import_cycles():
     modules = {}
     for package in PACKAGES:
         modules |= _modules(package)
-    graph = {m: {n for n in _imports(p, m, top_level_only=True) if n in modules and n != m} for m, p in modules.items()}
+    graph = {m: {n for n in _imports(p, m, top_level_only=False) if n in modules and n != m}
+             for m, p in modules.items()}
     # a module importing its own package's __init__ re-exports is not a cycle of concepts
     for m in graph:
         graph[m] = {n for n in graph[m] if not m.startswith(n + ".")}

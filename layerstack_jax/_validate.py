@@ -128,12 +128,15 @@ _PROGRAM_CHECKS: contextvars.ContextVar = contextvars.ContextVar("layerstack_pro
 def collecting_checks(errors: bool = True):
     """Within this block, traced plausibility tests — and, with ``errors``, traced checks — are
     collected into the yielded :class:`ProgramChecks` instead of calling back to the host /
-    ``equinox.error_if``."""
+    ``equinox.error_if``. The values traced here are a caller's concrete inputs, so they are
+    checked even inside :func:`traced_checks_off`."""
     collector = ProgramChecks(errors)
     token = _PROGRAM_CHECKS.set(collector)
+    checks_on = _TRACED_CHECKS.set(True)
     try:
         yield collector
     finally:
+        _TRACED_CHECKS.reset(checks_on)
         _PROGRAM_CHECKS.reset(token)
 
 
@@ -148,7 +151,10 @@ def traced_checks_off():
     solvers keep parameters within their bounds by a transform, but a line search may still try
     a point where that transform overflows (α = inf); the solver rejects such a step by its
     non-finite cost, where an error would end the whole fit. The fixed parts of a fitted model
-    were checked eagerly when the objective was built."""
+    were checked eagerly when the objective was built.
+
+    It acts while a function is traced: a ``jax.jit`` function first traced inside the block
+    keeps its checks off when called again outside it (JAX reuses the traced program)."""
     token = _TRACED_CHECKS.set(False)
     try:
         yield

@@ -138,6 +138,8 @@ NOT_SPECTRA = {
     "km_reflectance": "Kubelka-Munk closed forms of given K, S, X (test_kubelka_munk)",
     "km_transmittance": "Kubelka-Munk closed forms", "km_r_infinity": "Kubelka-Munk closed forms",
     "k_over_s": "Kubelka-Munk closed forms", "layered": "Kubelka-Munk closed forms",
+    "as_spectrum": "a spectrum given by value or function, as given", "progress_reporter": "progress (test_progress)",
+    "traced_checks_off": "a context manager (test_validation)",
 }
 
 CASES = [(name, kind, angle) for name in (*ARRAY_RETURNING, *TUPLE_RETURNING)

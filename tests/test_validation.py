@@ -125,6 +125,27 @@ def test_tabulated_out_of_range_inside_jit_raises():
         jax.block_until_ready(f(jnp.array([300.0, 650.0])))
 
 
+def test_traced_checks_off_leaves_a_trial_point_to_its_caller():
+    """``ls.traced_checks_off`` (for solvers whose line search may try a point outside the
+    domain): the same traced check that raises under ``jit`` is not compiled in (a function
+    traced inside the block keeps it off: JAX reuses its trace); concrete values are still
+    checked."""
+    mat = ls.Tabulated([400.0, 700.0], [1.5, 1.6], name="ink")
+    st = ls.Stack(1.0, [ls.Layer(mat, 100.0)], ls.Substrate(1.5))
+    def call(wl):
+        return ls.specular(st, wl, angle_rad=0.0).R_front
+
+    with ls.traced_checks_off():
+        unchecked = jax.jit(lambda wl: call(wl))
+        out = unchecked(jnp.array([300.0, 650.0]))  # outside the table: extrapolated, no error
+    assert out.shape == (2, 2)
+    assert unchecked(jnp.array([300.0, 650.0])).shape == (2, 2)  # its trace is reused outside the block
+    with pytest.raises(Exception, match="outside the data range"):
+        jax.block_until_ready(jax.jit(lambda wl: call(wl))(jnp.array([300.0, 650.0])))
+    with ls.traced_checks_off():
+        _raises("ink", call, jnp.array([300.0, 650.0]))
+
+
 def test_bad_tables():
     _raises("strictly increasing", ls.Tabulated, [400.0, 400.0], [1.5, 1.6])
     _raises("column n", ls.Tabulated, [400.0, 500.0, 600.0], [1.5, 1.6])

@@ -355,80 +355,8 @@ def markdown(best: dict, runs: list, machine: dict, uptime: str) -> list[str]:
                     f"{r['compiles']['further_fits']}, multi-start {r['compiles']['multistart_first']} then "
                     f"{r['compiles']['multistart']}" for r in runs) + ".",
     ]
-    return lines + WHERE_THE_TIME_GOES
-
-
-#: The profile behind the changes of issue 15 (text; the figures above are this run's).
-WHERE_THE_TIME_GOES = [
-    "",
-    "## Where the time goes, before and after (issue 15)",
-    "",
-    "Before (git eef5de4, the run this file held: 20.1 s CPU first fit, 97 ms CPU further fit, 28 s CPU for 16 "
-    "starts; profiled again at load ~3–9 on the same machine):",
-    "",
-    "- **compile**: one fit compiled one XLA program of 18.6k optimised HLO lines (7.9–11.4 s of XLA compile, 2.2 s "
-    "of tracing). The model was in it twice as a forward-mode Jacobian — the solver's and the statistics' — and each "
-    "copy read the six datasets (ψ, Δ at three angles) with six separate `ellipsometry()` calls of the same stack. "
-    "Measured pieces: LM + statistics with a trivial model 1.0 s; the model's Jacobian alone 8.1 s with six calls, "
-    "3.2 s with one call over the three angles (load ~8).",
-    "- **further fit** (97 ms CPU): the compiled solve 50 ms (11 LM steps + 1 statistics Jacobian, ~4 ms each), "
-    "post-processing ~10 ms (the Δ wrap of the reported residuals run op by op: 6 ms; eager broadcasts of the "
-    "data for the bound check).",
-    "- **16 starts**: a second, vmapped program (27 s CPU to compile); each vmapped block of 4 starts ran until its "
-    "slowest start ended, and 7 of the 16 starts wandered to `max_steps` = 256 at χ² ~1e10 (vs 4e3 at the "
-    "optimum) — 834 block steps at ~9 ms per start and step (a vmapped LM step costs a start about twice a "
-    "single one on this CPU).",
-    "",
-    "After:",
-    "",
-    "- the ideal ellipsometer datasets of one stack are read by one `ellipsometry()` over their angles "
-    "(`fitting._objective`, bit-identical values and Jacobian: `tests/test_fit_performance_compiles.py`);",
-    "- Levenberg–Marquardt (and Gauss–Newton, dogleg) take the statistics' Jacobian, model and residuals from the "
-    "solver's own last evaluation (optimistix `aux` of the final state): one copy of the model's Jacobian per "
-    "compiled fit, one Jacobian evaluation less per fit;",
-    "- a multi-start runs its starts one after the other through the fit's own compiled solver (no second "
-    "program), and a start still 10× above the best cost after 3× that start's steps is given up "
-    "(`give_up_rule`; counted apart in the report): on this data 7–10 of the 16 starts are given up after 33 "
-    "steps instead of running 60–256 steps to minima 1e5–1e7 times worse (they were counted as converged when "
-    "they reached one: the converged count drops from 11–13 to 6–9 of 16); the objective's own start wins ties "
-    "to round-off, so the multi-start reports the single fit;",
-    "- the reported residuals are made by one compiled call (`fitting._results._plain_residuals`).",
-    "",
-    "- the χ² verdict's tail probabilities come from `scipy.special.chdtr/chdtrc` (what `scipy.stats.chi2` calls, "
-    "same numbers) instead of importing `scipy.stats` on the first fit (0.4–0.7 s).",
-    "",
-    "The physics changed under this work: the closed-form film derivative of `layerstack_jax._coherent` (another "
-    "change, same day) made the model's Jacobian cheaper to compile and run. Same physics, old fitting layer "
-    "(git 9883a91) against the new one, one process each at load ~2.5: the fit's program 15.8k → 5.2k optimised "
-    "HLO lines, tracing and lowering 2.38 → 0.95 s CPU, XLA compile 4.35 → 2.78 s CPU; first fit 8.0 → 5.0 s "
-    "CPU; further fit 50 → 26–35 ms CPU; 16 starts 23.3 s (first call, 12 compilations) → 0.9 s (none) and "
-    "12.0 → 1.6 s (second call).",
-    "",
-    "2026-11-28, the first fit from ~3.3 s to ~2 s (same machine; before/after in fresh processes, alternating, "
-    "load ~1, each the median of 3 fits of new objectives in one process): the first fit 2.81–3.07 → 1.84–1.88 s "
-    "wall, the XLA compile of the fit's program 1.96–2.14 → 0.99–1.04 s, further fits 13–14 ms either way. Two "
-    "changes:",
-    "",
-    "- a single fit's programs are compiled with XLA's classic CPU fusion emitters "
-    "(`fitting._solve.SINGLE_FIT_COMPILER_OPTIONS`, `xla_cpu_use_fusion_emitters = false`, passed as JAX's "
-    "`compiler_options` of that program only): XLA's newer MLIR emitters compiled each of the program's ~135 "
-    "kernels through their own pipeline; the classic ones halve the XLA time and the solve runs as fast. Batched "
-    "fits (`fit_batch`, `fit_cube`: run time dominates) keep XLA's defaults (F1: 157/149 vs 162/159 fits/s with "
-    "and without the option). An XLA without the option, another backend, or the option in the user's "
-    "`XLA_FLAGS` leave XLA's defaults.",
-    "- material tables are interpolated in numpy on the model's (concrete) wavelength grid "
-    "(`layerstack_jax._materials.interpolate_table`): Si's table search (`jnp.interp`, two `searchsorted` loops) "
-    "was compiled into the program and run at every solver step, because the grid reached the tables as a traced "
-    "constant. The model's Jacobian compiled alone: 1.89–2.21 → 1.39–1.89 s CPU.",
-    "",
-    "Earlier (2026-11-27, idle: ~3.2 s): tracing ~0.9 s and XLA ~2.2 s for one program; at load ~3, compiled "
-    "alone, the model's residuals 1.0 s of XLA, its forward-mode Jacobian 3.2 s, the whole fit 4.8 s. Since the "
-    "table materials' range checks are off inside the solver (the objective checks its grid once), the program "
-    "holds no host callback and JAX's persistent compilation cache keeps it: the command line turns that cache "
-    "on, so a later `layerstack fit` of the same model structure loads the compiled fit. Other XLA CPU options "
-    "tried (codegen split count, LLVM expensive passes off, backend optimisation level 1, the thunk runtime off) "
-    "gave no reliable gain.",
-]
+    return lines + ["", "Where the time went before and after the changes of issue 15: "
+                    "[ellipsometry_fit_history.md](ellipsometry_fit_history.md)."]
 
 
 def _machine() -> dict:

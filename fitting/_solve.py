@@ -569,8 +569,8 @@ def require_compiled_method(caller: str, method: str) -> None:
 
 #: XLA options of the compiled programs of a single fit on the CPU (:func:`fit_jit`): XLA's
 #: classic fusion emitters rather than its MLIR ones. A fit of one measurement spends most of
-#: its time compiling (E1, issue 15: 3-angle × 700-λ ψ/Δ, Cauchy film on SiO2/Si — XLA 1.9–2.0 s
-#: → 1.0–1.2 s for the solver's program, the further fits 12–15 ms either way, 2026-11-28);
+#: its time compiling (E1: 3-angle × 700-λ ψ/Δ, Cauchy film on SiO2/Si: half the XLA time for
+#: the solver's program, the further fits as fast; benchmarks/results/ellipsometry_fit_history.md);
 #: batched fits (``fit_batch``, ``fit_cube``: run time dominates) keep XLA's defaults.
 SINGLE_FIT_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 

@@ -34,9 +34,9 @@ instead of 6.7 by JAX's own rules). Longer ones run it
 in the loop form of the forward (:func:`_packet_sweep`): γ's tangent is carried up the films
 with the recursion, τ's sensitivities come from one sweep back down over a few factors kept per
 film, and reverse mode keeps one stacked array of coefficients per film and transposes the loop
-into a multiply-add per film. P1 (10 films) value and thickness gradient: 52–58 ms against an
-18–24 ms forward; on stored coefficients (broadcast per interface, copied in reverse, XLA's
-complex division) 105–117 ms (2026-11-28, load < 1.3; 64.7 MB of temporaries instead of 195).
+into a multiply-add per film. P1 (10 films): value and thickness gradient in about 2.5 forwards,
+half the time and a third of the temporaries of a reverse pass over stored coefficients
+(broadcast per interface, copied in reverse, XLA's complex division).
 """
 
 
@@ -127,10 +127,10 @@ def _bottom_up(r, t, phase, own_loop: bool = True):
     ``own_loop`` (static): the phase factors are computed in a loop of their own
     (:func:`jax.lax.map` over the films) so that XLA keeps them in memory — for the derivative
     sweep, where fused into their readers their sine and cosine would be recomputed up to six
-    times (P3: Jacobian 0.18 vs 0.48 s, value+gradient 0.20 vs 0.52 s). The plain forward
-    (``own_loop=False``) lets XLA fuse them: P1 with dispersionless media 30 → 9–12 ms (the
-    separate loop materialised (F, A, wl) arrays that fusion never builds), P1 with per-wavelength
-    indices 96 ms either way, P3 forward 100 → 91 ms (measured 2026-11-27, same process)."""
+    times (P3: the Jacobian and the value+gradient in about 40 % of the time). The plain forward
+    (``own_loop=False``) lets XLA fuse them: a separate loop would materialise (F, A, wl) arrays
+    that fusion never builds (P1 with dispersionless media: 3× slower; with per-wavelength
+    indices the same either way)."""
     e1 = lax.map(_phase_factor, phase[::-1]) if own_loop else _phase_factor(phase[::-1])
     return r[:-1][::-1], t[:-1][::-1], e1, e1 * e1
 

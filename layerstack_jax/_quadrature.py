@@ -21,7 +21,7 @@ nodes: 4e-8 with the double map against 6e-7 with the single one). The error dec
 faster than the :math:`N^{-3}` of plain Gauss–Legendre. The number of segments is static (one per thick medium); the
 split points are traced, so the indices themselves can be fitted.
 
-Accuracy against node count (measured 2026-11-23; max |error| of r and t against the adaptive
+Accuracy against node count (max |error| of r and t against the adaptive
 scipy references of tests/reference.py). "named": the three minimal multilayer reproducers of
 tests/test_quadrature.py (low-index film / lossless thick layers / weakly absorbing thick layers);
 "Beer": α layers of αh = 1e-4 … 3 (n = 1.5 over 1.5, 1.6, 1.4, from 1.6, two layers), both sides.

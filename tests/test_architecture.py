@@ -8,13 +8,17 @@
   ``benchmarks`` — module-level, inside functions and under ``TYPE_CHECKING`` alike (an import
   deferred into a function still ties two concepts together);
 * no ``isinstance`` on a concrete geometry class outside the module that defines it;
-* no access to private attributes of optimistix, equinox or jaxopt.
+* no access to private attributes of optimistix, equinox or jaxopt;
+* comments and docstrings explain the code as it is: no dates, no before → after timings
+  (history lives in commit messages and ``benchmarks/results/``).
 """
 
 from __future__ import annotations
 
 import ast
+import io
 import re
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -234,3 +238,36 @@ def test_leaf_roles_come_from_field_declarations_only():
                 if re.search(r"""\[\s*["']exit["']\s*,\s*["']reflectance["']\s*\]|==\s*\(\s*["']exit["']\s*,\s*["']reflectance["']\s*\)""", code):
                     bad.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
     assert not bad, "\n".join(bad)
+
+
+#: a date (not a version string such as ``v2026-05-24``), or a timing that narrates a change ("30 → 9 ms")
+_HISTORY = re.compile(r"(?<![v\w])20\d\d-\d\d-\d\d\b|\d(?:\.\d+)?\s*(?:ms|s|µs)?\s*(?:→|->)\s*[\d.]+(?:[–-][\d.]+)?\s*(?:ms|s|µs)\b")
+
+
+def _comments_and_docstrings(source: str):
+    """``(line, text)`` of every comment and docstring of a module's ``source``."""
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.COMMENT:
+            yield tok.start[0], tok.string
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            doc = ast.get_docstring(node, clean=False)
+            if doc:
+                yield node.body[0].lineno, doc
+
+
+def _history_in(source: str, where: str) -> list[str]:
+    return [f"{where}:{line}: {m.group(0)!r}" for line, text in _comments_and_docstrings(source)
+            for m in _HISTORY.finditer(text)]
+
+
+def test_comments_carry_no_dates_or_before_after_timings():
+    bad = [b for package in PACKAGES for path in _modules(package).values()
+           for b in _history_in(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))]
+    assert not bad, "history belongs in commit messages and benchmarks/results/:\n" + "\n".join(bad)
+
+
+def test_the_history_check_can_fail():
+    source = ('"""Module (measured 2026-11-27)."""\n# forward 100 → 91 ms\nx = 1  # 30 -> 9 ms\n'
+              'def f():\n    """Release ``v2026-05-24``; 10 nm → 12 nm is a unit, not a timing."""\n')
+    assert [b.split(":")[1] for b in _history_in(source, "probe")] == ["2", "3", "1"], _history_in(source, "probe")

@@ -35,7 +35,7 @@ from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_cache, compiled_fit, multistart_points,
+from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_fit, multistart_points,
                      refit_chi2, require_compiled_method, settle_on_bounds, starting_point)
 from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
                           fit_statistics, separability_summary)
@@ -207,7 +207,7 @@ class LookupTable:
     def of(cls, objective: Objective, size: int = 256, seed: int = 0) -> "LookupTable":
         """The table of ``objective``, made once and kept with its compiled solvers (the
         regions of a cube fit reuse it)."""
-        cache = compiled_cache(objective)
+        cache = objective.cache
         key = ("lookup", size, seed)
         if key not in cache:
             cache[key] = cls(objective, size, seed)

@@ -408,6 +408,9 @@ class Objective:
         self.n_points = int(sum(m.sum() for m in self._mask))
         self._check_wavelengths_read()
         self.optics = self._fixed_optics()
+        #: what this process compiled or precomputed for this objective (solvers, lookup tables,
+        #: the Jacobian's structure), filled by the fitting functions; never pickled
+        self.cache: dict = {}
         # check once, eagerly, that the forward model runs on the grid (tables cover it, …)
         try:  # traced once, not run: static checks (tables cover the grid, shapes) happen at trace time
             jax.eval_shape(self.predict, jnp.asarray(self.layout.x0))
@@ -416,11 +419,15 @@ class Objective:
 
     def __getstate__(self) -> dict:
         """Pickled (e.g. scattered to Dask workers by :func:`~fitting.fit_cube`) without what has
-        been compiled for it in this process (solvers, lookup tables: ``_compiled``, neither
+        been compiled for it in this process (:attr:`cache`: solvers, lookup tables, neither
         picklable nor valid in another process); the receiving process compiles its own once."""
         state = dict(self.__dict__)
-        state.pop("_compiled", None)
+        state.pop("cache", None)
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.cache = {}
 
     def _check_wavelengths_read(self) -> None:
         """Material tables against the wavelengths each instrument reads beyond the model grid

@@ -659,7 +659,7 @@ def _plain_residuals(objective: Objective, model, data) -> list:
     and shapes and kept with it (op by op, the Δ wrap alone cost milliseconds per fit)."""
     import jax
 
-    cache = objective.__dict__.setdefault("_compiled", {})  # with its solvers (fitting._solve.compiled_cache)
+    cache = objective.cache
     fn = cache.get("plain_residuals")
     if fn is None:
         fn = cache["plain_residuals"] = jax.jit(

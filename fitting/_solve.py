@@ -283,14 +283,6 @@ def _status(result, x):
 
 
 # --------------------------------------------------------------------------- compiled solves
-def compiled_cache(objective: Objective) -> dict:
-    """What is compiled or precomputed for ``objective`` (solvers, lookup tables), kept with it."""
-    c = objective.__dict__.get("_compiled")
-    if c is None:
-        c = objective.__dict__["_compiled"] = {}
-    return c
-
-
 def _solve_function(objective: Objective, o: SolverOptions):
     """Pure ``(start, args, optics, give_up) -> (x, steps, status)``; ``start`` is ``u``
     (optimistix) or ``z`` (L-BFGS-B); ``optics`` the objective's fixed optics (or None);
@@ -495,7 +487,7 @@ def structure_for(objective, mode: str, method: str) -> Optional[Structure]:
         raise LayerstackError(f"structure must be one of {STRUCTURE_MODES}, got {mode!r}")
     if mode == "dense":
         return None
-    cache = compiled_cache(objective)
+    cache = objective.cache
     if "structure" not in cache:
         cache["structure"] = find_structure(objective)
     st, why = cache["structure"]
@@ -637,7 +629,7 @@ def compiled_fit(objective: Objective, o: SolverOptions, batched: bool, block: i
     split over them (sharding of the fits' axis; the block is padded to a multiple of the device
     count). Compiled once per objective, options and batching; cached on the objective."""
     key = ("fit", o, batched, block if batched else None)
-    cache = compiled_cache(objective)
+    cache = objective.cache
     if key not in cache and o.method in HOST_METHODS:
         cache[key] = _host_fit(objective, o, batched)
     if key not in cache:
@@ -835,7 +827,7 @@ def _refit(objective: Objective, o: SolverOptions, out: FitOutput, rows, args) -
     layout = objective.layout
     start = np.asarray(starting_point(objective, o, np.clip(np.asarray(out.x, float)[rows], layout.lower,
                                                             layout.upper)))
-    if ("fit", o, True, BLOCK) not in compiled_cache(objective):
+    if ("fit", o, True, BLOCK) not in objective.cache:
         # fits of ``fit`` (one start or a multi-start): the solver it has compiled, one fit after
         # the other, not a batched copy compiled for them (host rows in: no eager device ops)
         one = compiled_fit(objective, o, batched=False)

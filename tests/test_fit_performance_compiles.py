@@ -203,7 +203,7 @@ def test_single_fit_compiler_options(monkeypatch):
         assert probe("gpu") is None
         fresh = _objective()
         with_options = ft.fit(fresh)
-        (fn,) = [v for k, v in fresh._compiled.items() if k[0] == "fit"]
+        (fn,) = [v for k, v in fresh.cache.items() if k[0] == "fit"]
         assert fn.jitted.top is not fn.jitted.jitted  # the single fit was compiled with the options
         monkeypatch.setattr(_solve, "_compiler_options", lambda backend: None)
         default = ft.fit(_objective())

@@ -349,7 +349,7 @@ def test_second_fit_with_other_data_does_not_retrace(monkeypatch):
     assert r1.converged and r2.converged
     assert r1.values["thickness[slab]"] == pytest.approx(10_000.0, rel=1e-9)
     assert r2.values["thickness[slab]"] == pytest.approx(13_000.0, rel=1e-9)
-    (fn,) = [v for k, v in obj._compiled.items() if k[0] == "fit"]
+    (fn,) = [v for k, v in obj.cache.items() if k[0] == "fit"]
     assert fn._cache_size() == 1
 
 

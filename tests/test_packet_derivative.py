@@ -89,7 +89,8 @@ def path(request, monkeypatch):
     return request.param
 
 
-@pytest.mark.parametrize("films,metal", [(1, False), (3, True), (11, True)])
+# 11 films (the loop form by default, as "sweep" forces it for 1 and 3): ~90 s of compiling
+@pytest.mark.parametrize("films,metal", [(1, False), (3, True), pytest.param(11, True, marks=pytest.mark.slow)])
 def test_packet_matches_plain_values_and_derivatives(films, metal, path):
     if films > _THRESHOLD and path == "sweep":
         pytest.skip("the default already")

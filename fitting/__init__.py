@@ -16,6 +16,8 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   identifiability, report, JSON, plot);
 * :mod:`fitting._batch` — :func:`fit_batch` (many independent fits in one compiled, chunked,
   vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ));
+* :mod:`fitting._drawdown` — :func:`drawdown_calibration`: a paint's Kubelka–Munk K(λ), S(λ)
+  from drawdowns over grounds of known reflectance;
 * :mod:`fitting._cube` — :func:`fit_cube`: every pixel of a hyperspectral cube, out of core,
   resumable, on Dask (local or a cluster), maps written to zarr;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
@@ -36,6 +38,7 @@ from ._batch import BatchResult as BatchResult
 from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
+from ._drawdown import drawdown_calibration as drawdown_calibration
 from ._cube import CUBE_STATUS as CUBE_STATUS
 from ._cube import FIT_MADE as FIT_MADE
 from ._cube import NEGATIVE_SIGMAS as NEGATIVE_SIGMAS
@@ -83,6 +86,7 @@ __all__ = [
     "BatchResult",
     "background_rho_g",
     "calibration_series",
+    "drawdown_calibration",
     "fit_batch",
     "fit_cube",
     "cube_regions",

@@ -18,6 +18,8 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   vmapped solve) and :func:`calibration_series` (joint fit of samples sharing α(λ), ρg(λ));
 * :mod:`fitting._drawdown` — :func:`drawdown_calibration`: a paint's Kubelka–Munk K(λ), S(λ)
   from drawdowns over grounds of known reflectance;
+* :mod:`fitting._varnish_removal` — :func:`varnish_removal`: a fitted painting (one fit, a
+  batch, a cube's maps) predicted without its varnish or under a fresh one, spectra and sRGB;
 * :mod:`fitting._cube` — :func:`fit_cube`: every pixel of a hyperspectral cube, out of core,
   resumable, on Dask (local or a cluster), maps written to zarr;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
@@ -38,10 +40,10 @@ from ._batch import BatchResult as BatchResult
 from ._batch import background_rho_g as background_rho_g
 from ._batch import calibration_series as calibration_series
 from ._batch import fit_batch as fit_batch
-from ._drawdown import drawdown_calibration as drawdown_calibration
 from ._cube import CUBE_STATUS as CUBE_STATUS
 from ._cube import FIT_MADE as FIT_MADE
 from ._cube import NEGATIVE_SIGMAS as NEGATIVE_SIGMAS
+from ._cube import cube_parameters as cube_parameters
 from ._cube import cube_regions as cube_regions
 from ._cube import fit_cube as fit_cube
 from ._design import ColourTarget as ColourTarget
@@ -64,6 +66,7 @@ from ._design_file import design_stack_dict as design_stack_dict
 from ._design_file import load_design as load_design
 from ._design_file import plot_design as plot_design
 from ._design_file import run_design as run_design
+from ._drawdown import drawdown_calibration as drawdown_calibration
 from ._objective import Dataset as Dataset
 from ._objective import Objective as Objective
 from ._objective import resample as resample
@@ -81,12 +84,17 @@ from ._results import FitResult as FitResult
 from ._solve import HOST_METHODS as HOST_METHODS
 from ._solve import METHODS as METHODS
 from ._solve import fit as fit
+from ._varnish_removal import VarnishRemoval as VarnishRemoval
+from ._varnish_removal import varnish_removal as varnish_removal
 
 __all__ = [
     "BatchResult",
     "background_rho_g",
     "calibration_series",
     "drawdown_calibration",
+    "cube_parameters",
+    "varnish_removal",
+    "VarnishRemoval",
     "fit_batch",
     "fit_cube",
     "cube_regions",

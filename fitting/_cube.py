@@ -97,7 +97,7 @@ from ._solve import require_compiled_method
 
 __all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
            "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
-           "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER"]
+           "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER", "cube_parameters"]
 
 log = logging.getLogger("fitting.cube")
 
@@ -139,6 +139,22 @@ _SAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
 def _var(name: str) -> str:
     """A zarr-safe variable name for a parameter component (``varnish.alpha[3]`` → ``varnish.alpha_3``)."""
     return _SAFE.sub("_", name).strip("_") or "parameter"
+
+
+def cube_parameters(objective: Objective, maps) -> np.ndarray:
+    """The fitted parameter vectors of a cube, ``(y, x, P)`` in the order of
+    ``objective.layout.names``, from the maps :func:`fit_cube` wrote (an ``xarray.Dataset``, or
+    the path of its zarr store); NaN where no fit was made."""
+    if not hasattr(maps, "data_vars"):
+        import xarray as xr
+
+        maps = xr.open_zarr(maps)
+    names = [_var(n) for n in objective.layout.names]
+    missing = [n for n in names if n not in maps.data_vars]
+    if missing:
+        raise LayerstackError(f"cube_parameters: the maps lack {', '.join(missing)}: were they written by fit_cube "
+                              "for this objective?")
+    return np.stack([np.asarray(maps[n].values, float) for n in names], axis=-1)
 
 
 def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:

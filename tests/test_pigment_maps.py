@@ -96,3 +96,47 @@ def test_a_stopped_run_resumes_to_identical_maps(maps, tmp_path):
     resumed = ft.fit_cube(_objective(), CUBE, out=out, progress=False, **OPTIONS).load()
     for name in maps.data_vars:
         np.testing.assert_array_equal(resumed[name].values, maps[name].values, err_msg=name)
+
+
+# ----------------------------------------------------------------------------- virtual varnish removal
+
+def _bare(c):
+    return ls.Stack(1.0, [], ls.KubelkaMunk(1.5, ls.Mixture(c, PIGMENTS)))
+
+
+def test_varnish_removal_of_the_cube_is_the_fitted_body_bare(maps):
+    """Each pixel's fitted body without its varnish reads what that body reads bare (built here
+    by hand from the maps' concentrations), close to the body the cube was made from; with the
+    varnish, what the cube read (within its noise); and as sRGB colours of the image shape."""
+    obj = _objective()
+    x = ft.cube_parameters(obj, maps)
+    assert x.shape == (NY, NX, 3)
+    colours = ls.ColourSpace(WL, extrapolate="constant")
+    r = ft.varnish_removal(obj, x, layer="varnish", colour_space=colours)
+    assert r.varnished.shape == r.removed.shape == (NY, NX, WL.size)
+    assert r.srgb_removed.shape == (NY, NX, 3) and np.all((r.srgb_removed >= 0) & (r.srgb_removed <= 1))
+    c_fit = np.stack([np.full((NY, NX), 0.6), maps["c_1"].values, maps["c_2"].values], -1)
+    for iy, ix in [(0, 0), (1, 3), (3, 4)]:
+        bare = np.asarray(ls.reflectance(_bare(c_fit[iy, ix]), WL, GEOMETRY))
+        np.testing.assert_allclose(r.removed[iy, ix], bare, rtol=1e-12, atol=1e-15)
+        truth = np.asarray(ls.reflectance(_bare(C_TRUE[iy, ix]), WL, GEOMETRY))
+        assert np.max(np.abs(r.removed[iy, ix] - truth)) < 0.015  # the fit's noise (c and h correlate)
+    assert np.sqrt(np.mean((r.varnished - CUBE) ** 2)) < 1.5 * SIGMA
+    assert np.all(r.removed > r.varnished)  # the absorbing varnish darkens every band
+    np.testing.assert_allclose(r.srgb_removed, np.asarray(colours.sRGB(r.removed, clip=True)), rtol=0, atol=1e-12)
+
+
+def test_varnish_replaced_by_a_fresh_one_and_refusals():
+    obj = _objective()
+    x = np.array([[0.2, 0.3, 20_000.0], [np.nan, np.nan, np.nan]])
+    fresh = ls.Layer(1.52, 10_000.0, coherent=False, alpha=0.0, name="fresh varnish")
+    r = ft.varnish_removal(obj, x, replacement=fresh)
+    want = ls.reflectance(ls.Stack(1.0, [fresh], ls.KubelkaMunk(1.5, ls.Mixture(np.array([0.6, 0.2, 0.3]), PIGMENTS))),
+                          WL, GEOMETRY)
+    np.testing.assert_allclose(r.removed[0], np.asarray(want), rtol=1e-12)
+    assert np.all(np.isnan(r.removed[1])) and np.all(np.isnan(r.varnished[1]))  # a fit not made
+    assert r.srgb_removed is None
+    with pytest.raises(ls.LayerstackError, match=r"no layer named 'glaze'.*layers: 'varnish'"):
+        ft.varnish_removal(obj, x, layer="glaze")
+    with pytest.raises(ls.LayerstackError, match="must end in the objective's 3 free parameters"):
+        ft.varnish_removal(obj, x[:, :2])

@@ -11,6 +11,12 @@ drawdowns leave no degrees of freedom (as many unknowns as readings: χ² cannot
 and with noise the solver may wander where a reading is dark); a third, at another thickness,
 makes the fit checkable and its standard errors calibrated (tests/test_drawdown.py).
 
+A strongly absorbing pigment drawn down alone (masstone) is nearly black in its absorption band:
+there the readings are the surface reflection and K, S are not determined. Paint makers
+calibrate such pigments from *tints* — the pigment mixed with a white of known K, S at known
+fractions (Duncan's rule, K = fK_p + (1 − f)K_w, S = fS_p + (1 − f)S_w) — which keeps every
+drawdown bright enough to read (``white=``, ``fractions=``).
+
 Here each drawdown is a :class:`~layerstack_jax.KubelkaMunk` body (Kubelka's hyperbolic
 solution for thickness X over ground :math:`R_g`, Kubelka 1948 eqs. 5–6) under the binder's
 interface, measured by the given geometry: the surface reflection and the internal reflection
@@ -27,7 +33,7 @@ from typing import Optional, Union
 
 import numpy as np
 
-from layerstack_jax import Geometry, KubelkaMunk, LayerstackError, Paint, Stack, k_over_s
+from layerstack_jax import Geometry, KubelkaMunk, LayerstackError, Mixture, Paint, Stack, k_over_s
 
 from ._objective import Dataset, Objective
 from ._parameters import Parameter
@@ -54,7 +60,8 @@ def _ground_spectra(grounds, n: int, wl: int) -> np.ndarray:
 
 def drawdown_calibration(wavelength_nm, geometry: Geometry, readings, grounds, thickness_nm, *,
                          binder_index=1.5, ambient=1.0, sigma=None, start: Optional[tuple] = None,
-                         basis: Union[str, int] = "free", nodes: Optional[int] = None) -> Objective:
+                         basis: Union[str, int] = "free", white: Optional[Paint] = None, fractions=None,
+                         nodes: Optional[int] = None) -> Objective:
     r"""Objective of a two-constant Kubelka–Munk calibration (module docstring): K(λ), S(λ)
     (1/nm) of one paint from ``n`` drawdowns of known thickness over known grounds.
 
@@ -75,6 +82,10 @@ def drawdown_calibration(wavelength_nm, geometry: Geometry, readings, grounds, t
             :math:`R_\infty` (Kubelka 1948 eq. 9).
         basis: ``"free"`` (one K and one S per wavelength) or an int (B-spline functions over
             the grid for each).
+        white, fractions: tints (module docstring): a :class:`~layerstack_jax.Paint` of known
+            K, S mixed into the drawdowns, and ``(n,)`` the calibrated paint's fraction in each
+            (1 for a masstone); the white's share is 1 − fraction. None: every drawdown is the
+            paint alone.
         nodes: hemispherical quadrature nodes of the model (default: the library's).
 
     Returns an :class:`~fitting.Objective` whose free parameters are named ``"K"`` and ``"S"``;
@@ -105,15 +116,30 @@ def drawdown_calibration(wavelength_nm, geometry: Geometry, readings, grounds, t
     else:
         k0, s0 = (np.broadcast_to(np.asarray(v, float), wl.shape).copy() for v in start)
 
+    paint_path = ("exit", "paint")
+    mixing = []
+    if white is not None or fractions is not None:
+        f = np.asarray(fractions, float) if fractions is not None else None
+        if white is None or f is None or f.shape != (n,) or np.any(~np.isfinite(f)) or np.any((f <= 0) | (f > 1)):
+            raise LayerstackError(f"drawdown_calibration: tints need white= (a Paint of known K, S) and fractions= "
+                                  f"(the paint's share in each of the {n} drawdowns, in (0, 1]), got white={white!r}, "
+                                  f"fractions={fractions!r}")
+        shares = np.stack([f, 1.0 - f], axis=-1)
+        paint_path = ("exit", "paint", "pigments", 0)
+        mixing = [Parameter(("exit", "paint", "concentrations"), name="fractions", per_sample=True, value=shares,
+                            fixed=np.ones_like(shares, bool))]
+
     def stack(k, s):
-        return Stack(ambient, [], KubelkaMunk(binder_index, Paint(k, s, name="paint"), float(x[0]), rg[0]))
+        paint = Paint(k, s, name="paint")
+        body = paint if not mixing else Mixture(mixing[0].value[0], [paint, white])
+        return Stack(ambient, [], KubelkaMunk(binder_index, body, float(x[0]), rg[0]))
 
     spectral = dict(kind="alpha", basis=basis)
-    parameters = [Parameter(("exit", "paint", "absorption"), name="K", value=None, **spectral),
-                  Parameter(("exit", "paint", "scattering"), name="S", value=None, **spectral),
+    parameters = [Parameter((*paint_path, "absorption"), name="K", value=None, **spectral),
+                  Parameter((*paint_path, "scattering"), name="S", value=None, **spectral),
                   Parameter(("exit", "ground"), kind="rho_g", name="ground", basis="free", per_sample=True,
                             value=rg, fixed=np.ones_like(rg, bool)),
                   Parameter(("exit", "thickness"), kind="thickness", name="X", per_sample=True, value=x,
-                            fixed=np.ones(n, bool))]
+                            fixed=np.ones(n, bool)), *mixing]
     kwargs = {} if nodes is None else {"nodes": nodes}
     return Objective(stack(k0, s0), wl, Dataset(geometry, data, sigma=sigma), parameters, n_samples=n, **kwargs)

@@ -80,3 +80,25 @@ def test_bad_drawdowns_are_refused_naming_the_field():
         ft.drawdown_calibration(WL, g, data, [0.03, 0.5, 0.85], 20_000.0)
     with pytest.raises(ls.LayerstackError, match="thickness_nm must be > 0"):
         ft.drawdown_calibration(WL, g, data, [0.03, 0.85], [20_000.0, 0.0])
+
+
+def test_tints_with_a_known_white_calibrate_a_strong_absorber():
+    """A pigment too dark to read alone in its absorption band (K X ≈ 6): drawdowns of its masstone
+    and of tints with a white of known K, S (Duncan's rule) give back its K and S."""
+    wl = np.linspace(400.0, 700.0, 16)
+    white = ls.Paint(np.full(wl.size, 2e-6), 3e-3 * (550.0 / wl), name="white")
+    red = ls.Paint(4e-4 * np.exp(-0.5 * ((wl - 490.0) / 50.0) ** 2) + 2e-6, 2e-4 * (550.0 / wl), name="red")
+    geometry = ls.Sphere(8.0, "included")
+    grounds = [np.full(wl.size, 0.03), np.full(wl.size, 0.86)] * 2
+    fractions = np.array([1.0, 1.0, 0.1, 0.1])
+    data = np.stack([np.asarray(ls.reflectance(ls.Stack(1.0, [], ls.KubelkaMunk(
+        1.5, ls.Mixture(np.array([f, 1.0 - f]), [red, white]), 15_000.0, g)), wl, geometry))
+        for g, f in zip(grounds, fractions)])
+    r = ft.fit(ft.drawdown_calibration(wl, geometry, data, grounds, 15_000.0, white=white, fractions=fractions))
+    assert r.converged, r.reason
+    np.testing.assert_allclose(r.values["K"], red.absorption, rtol=1e-6)
+    np.testing.assert_allclose(r.values["S"], red.scattering, rtol=1e-6)
+    with pytest.raises(ls.LayerstackError, match="tints need white="):
+        ft.drawdown_calibration(wl, geometry, data, grounds, 15_000.0, fractions=fractions)
+    with pytest.raises(ls.LayerstackError, match=r"in \(0, 1\]"):
+        ft.drawdown_calibration(wl, geometry, data, grounds, 15_000.0, white=white, fractions=[1.0, 1.0, 10.0, 10.0])

@@ -431,3 +431,30 @@ def test_a_body_fitted_from_the_command_line(tmp_path):
                  str(tmp_path / "g.json")]) == 0
     warnings = " ".join(json.loads((tmp_path / "g.json").read_text())["fits"][0]["quality"]["warnings"])
     assert "cannot separate" in warnings and "thickness_nm" in warnings
+
+
+def test_pigment_maps_from_the_command_line(tmp_path):
+    """``layerstack fit-cube`` with a stack file that declares the body and its pigments: the
+    red's concentration and the paint thickness of every pixel of a small noise-free cube come
+    back as maps (zarr), equal to the values the cube was made from."""
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
+    from layerstack_cli import main
+
+    (tmp_path / "s.toml").write_text(BODY_FILE)
+    wl = np.arange(400.0, 701.0, 20.0)
+    red = np.array([[0.2, 0.3, 0.4], [0.25, 0.35, 0.45]])
+    thickness = np.array([[15000.0, 20000.0, 25000.0], [30000.0, 35000.0, 40000.0]])
+    base = _by_hand()
+    cube = np.stack([np.stack([np.asarray(ls.reflectance(ls.Stack(base.ambient, base.layers, ls.KubelkaMunk(
+        1.5, ls.Mixture(np.array([0.6, c]), base.exit.paint.pigments), x, 0.8)), wl, ls.Directional(45.0, 0.0)))
+        for c, x in zip(rc, rx)]) for rc, rx in zip(red, thickness)])
+    np.save(tmp_path / "cube.npy", cube)
+    out = tmp_path / "maps.zarr"
+    assert main(["fit-cube", str(tmp_path / "s.toml"), str(tmp_path / "cube.npy"), "-w", "400:700:20", "-g", "45/0",
+                 "--sigma", "1e-3", "--no-quicklook", "-o", str(out)]) == 0
+    maps = xr.open_zarr(out, consolidated=False)
+    assert {"concentration_red", "concentration_red_stderr", "thickness_nm"} <= set(maps.data_vars)
+    np.testing.assert_allclose(maps["concentration_red"].values, red, rtol=1e-6)
+    np.testing.assert_allclose(maps["thickness_nm"].values, thickness, rtol=1e-6)
+    assert np.all(maps["status"].values == 0)

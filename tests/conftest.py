@@ -11,6 +11,10 @@
   ``complex_from``). Users keep JAX's standard promotion (the package never changes it).
 * ``tests/`` and the repository root are put on ``sys.path`` so that ``import reference`` and
   ``import layerstack_jax`` work from any working directory without an installed package.
+* JAX's compilation caches are emptied after each test module: every compiled XLA CPU program
+  holds ~3 memory mappings for as long as it is cached, and a worker that compiles ~20,000
+  programs reaches the kernel's ``vm.max_map_count`` (65,530), where LLVM's JIT memory manager
+  crashes (a segfault inside ``backend_compile_and_load``, seen as "worker crashed").
 """
 
 from __future__ import annotations
@@ -51,3 +55,15 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+import gc  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """Empty JAX's compilation caches after each test module (module docstring)."""
+    yield
+    jax.clear_caches()
+    gc.collect()

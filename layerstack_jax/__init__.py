@@ -27,12 +27,12 @@ from ._colour import xyz_to_lab as xyz_to_lab
 from ._colour import xyz_to_xyy as xyz_to_xyy
 from ._cubes import as_cube as as_cube
 from ._cubes import open_cube as open_cube
-from ._custom_types import RealLike as RealLike
 from ._cubes import read_envi as read_envi
 from ._cubes import read_netcdf as read_netcdf
 from ._cubes import read_npy as read_npy
 from ._cubes import read_zarr as read_zarr
 from ._cubes import write_zarr_cube as write_zarr_cube
+from ._custom_types import RealLike as RealLike
 from ._database import DatabaseFormula as DatabaseFormula
 from ._database import database_version as database_version
 from ._database import material as material
@@ -87,6 +87,7 @@ from ._polarimetry import mueller_from_jones as mueller_from_jones
 from ._polarimetry import polarized_brdf as polarized_brdf
 from ._polarimetry import specular_mueller as specular_mueller
 from ._polarimetry import stokes as stokes
+from ._progress import reporter as progress_reporter
 from ._quadrature import DEFAULT_NODES as DEFAULT_NODES
 from ._render_tables import CoatingTables as CoatingTables
 from ._render_tables import coating_tables as coating_tables
@@ -123,7 +124,6 @@ from ._stack import Substrate as Substrate
 from ._stack import TabulatedSpectrum as TabulatedSpectrum
 from ._stack import as_spectrum as as_spectrum
 from ._stack import check_stack as check_stack
-from ._progress import reporter as progress_reporter
 from ._validate import LayerstackError as LayerstackError
 from ._validate import LayerstackWarning as LayerstackWarning
 from ._validate import traced_checks_off as traced_checks_off

@@ -60,8 +60,8 @@ from ._results import build_result
 from ._statistics import bound_contacts
 from ._structured import (STRUCTURE_MODES, CompressedJacobian, Structure, StructuredDampedNewtonDescent,
                           block_distance, compressed_jacobian_function, find_structure, sparse_jacobian_function,
-                          structured_jacobian_with_statistics, structured_statistics_function, verify_structure,
-                          with_args_tangent)
+                          residuals_with_jacobian, structured_jacobian_with_statistics, structured_statistics_function,
+                          verify_structure, with_args_tangent)
 from ._watchdog import wait_for
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
@@ -374,11 +374,12 @@ def jacobian_with_statistics(objective: Objective, structure=None):
     model spectra, weighted data residuals, penalty residuals, :math:`J = \partial r/\partial z`).
 
     One forward-mode pass (``jax.jacfwd``: one primal pass and P tangents) gives ``r``, the
-    by-products and :math:`J`; the derivative w.r.t. ``u`` is :math:`J\,D` with the ``(P, P)``
-    :math:`D = \partial z/\partial u` (zero columns for components held on a bound), applied
-    as a dense product (a custom JVP, as :func:`dense_jacobian`): linearising ``fn`` costs one
-    ``jacfwd`` of the model. Tangents of ``args`` (never used by the solvers) are propagated
-    exactly by a separate JVP.
+    by-products and :math:`J`; the derivative w.r.t. ``u`` is :math:`J\,D` with
+    :math:`D = \partial z/\partial u` (zero for components held on a bound), applied as
+    :math:`J\,(D\,\delta u)` (the JVP of ``z_of``; a custom JVP,
+    :func:`fitting._structured.residuals_with_jacobian`): linearising ``fn`` costs one ``jacfwd``
+    of the model. Tangents of ``args`` (never used by the solvers) are propagated exactly by a
+    separate JVP.
 
     With a ``structure`` (:class:`fitting._structured.Structure`) the Jacobian is formed and
     applied in compressed form (:func:`fitting._structured.structured_jacobian_with_statistics`)."""
@@ -392,34 +393,8 @@ def jacobian_with_statistics(objective: Objective, structure=None):
     if structure is not None:
         return structured_jacobian_with_statistics(objective, structure, parts, z_of, _traced_once)
 
-    def evaluate(u, args_optics):
-        def value_twice(z):  # the Jacobian's function and, as aux, its value and by-products: one pass
-            flat, by = parts(z, *args_optics)
-            return flat, (flat, by)
-
-        J, (r, by) = jax.jacfwd(value_twice, has_aux=True)(z_of(u))
-        return r, (by, J)
-
-    # jitted: optimistix traces the primal for its shapes and the JVP rule below for the solve;
-    # the second trace is then a cache hit (inlined by XLA: nothing changes at run time) — in
-    # the same abstract-mesh context (_traced_once), else JAX's tracing cache misses
-    evaluate = _traced_once(jax.jit(evaluate))
-
-    @jax.custom_jvp
-    def g(u, args_optics):
-        return evaluate(u, args_optics)
-
-    def g_jvp(primals, tangents):
-        u, args_optics = primals
-        du, dargs = tangents
-        r, aux = evaluate(u, args_optics)
-        J = aux[1]
-        out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else J @ (jax.jacfwd(z_of)(u) @ du)
-        out = with_args_tangent(out, lambda a: parts(z_of(u), *a)[0], args_optics, dargs)
-        return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
-
-    g.defjvp(g_jvp, symbolic_zeros=True)
-    return g
+    return residuals_with_jacobian(parts, z_of, _traced_once, lambda f, z: jax.jacfwd(f, has_aux=True)(z),
+                                   lambda J, dz: J @ dz)
 
 
 def _traced_once(jitted: Callable) -> Callable:

@@ -69,7 +69,7 @@ from layerstack_jax import traced_checks_off
 __all__ = ["Structure", "CompressedJacobian", "find_structure", "verify_structure", "STRUCTURE_MODES",
            "StructuredDampedNewtonDescent", "structured_jacobian_with_statistics", "structured_statistics_function",
            "damped_block_solve", "dense_of", "compressed_jacobian_function", "sparse_jacobian_function",
-           "with_args_tangent"]
+           "with_args_tangent", "residuals_with_jacobian"]
 
 #: ``structure=`` of :func:`~fitting.fit`: choose, always the dense Jacobian, or insist on the structured one.
 STRUCTURE_MODES = ("auto", "dense", "structured")
@@ -412,21 +412,26 @@ def with_args_tangent(out, of_args: Callable, args, dargs):
     return out + jax.jvp(of_args, (args,), (dargs,))[1]
 
 
-def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_parts, z_of, traced_once):
-    r""":func:`fitting._solve.jacobian_with_statistics` with the Jacobian formed in compressed
-    form (``g + b`` tangents, :func:`_compressed_jacobian`) and applied by
-    :func:`apply_compressed` in the JVP rule: ``fn(u, (args, optics)) -> (r, ((model,
-    residuals, penalty), CompressedJacobian))``."""
-    seeds = jnp.asarray(st.seeds)
+def residuals_with_jacobian(residuals_and_parts, z_of, traced_once, jacobian: Callable, apply: Callable):
+    r"""``fn(u, (args, optics)) -> (r, ((model, residuals, penalty), J))``: the residuals at
+    ``z = z_of(u)`` with the Jacobian ``J`` formed once per evaluation by ``jacobian(f, z) ->
+    (J, aux)`` (``f`` returns its value and by-products as aux: one pass), and a JVP rule that
+    applies it, ``apply(J, dz)``, instead of differentiating the model again. Linearising ``fn``
+    (``jax.linearize``, the solvers) thus costs one Jacobian; tangents of ``args`` (never used by
+    the solvers) are propagated exactly by :func:`with_args_tangent`. The dense form
+    (:func:`fitting._solve.jacobian_with_statistics`: ``jax.jacfwd``, ``J @ dz``) and the
+    compressed one (:func:`structured_jacobian_with_statistics`) differ only in the two callables."""
 
     def evaluate(u, args_optics):
         def value_twice(z):
             flat, by = residuals_and_parts(z, *args_optics)
             return flat, (flat, by)
 
-        K, (r, by) = _compressed_jacobian(value_twice, z_of(u), seeds.astype(u.dtype))
-        return r, (by, CompressedJacobian(K, st))
+        J, (r, by) = jacobian(value_twice, z_of(u))
+        return r, (by, J)
 
+    # jitted: optimistix traces the primal for its shapes and the JVP rule below for the solve;
+    # the second trace is then a cache hit (inlined by XLA: nothing changes at run time)
     evaluate = traced_once(jax.jit(evaluate))
 
     @jax.custom_jvp
@@ -437,16 +442,27 @@ def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_
         u, args_optics = primals
         du, dargs = tangents
         r, aux = evaluate(u, args_optics)
-        K = aux[1].K
-        if isinstance(du, SymbolicZero):
-            out = jnp.zeros_like(r)
-        else:
-            out = apply_compressed(K, st, jax.jvp(z_of, (u,), (du,))[1])  # z(u) acts componentwise
+        out = jnp.zeros_like(r) if isinstance(du, SymbolicZero) else apply(aux[1], jax.jvp(z_of, (u,), (du,))[1])
         out = with_args_tangent(out, lambda a: residuals_and_parts(z_of(u), *a)[0], args_optics, dargs)
         return (r, aux), (out, jax.tree.map(jnp.zeros_like, aux))
 
     g.defjvp(g_jvp, symbolic_zeros=True)
     return g
+
+
+def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_parts, z_of, traced_once):
+    r""":func:`fitting._solve.jacobian_with_statistics` with the Jacobian formed in compressed
+    form (``g + b`` tangents, :func:`_compressed_jacobian`) and applied by
+    :func:`apply_compressed` in the JVP rule: ``fn(u, (args, optics)) -> (r, ((model,
+    residuals, penalty), CompressedJacobian))``."""
+    seeds = jnp.asarray(st.seeds)
+
+    def jacobian(f, z):
+        K, aux = _compressed_jacobian(f, z, seeds.astype(z.dtype))
+        return CompressedJacobian(K, st), aux
+
+    return residuals_with_jacobian(residuals_and_parts, z_of, traced_once, jacobian,
+                                   lambda J, dz: apply_compressed(J.K, st, dz))
 
 
 def structured_statistics_function(objective, st: Structure, residuals_and_parts):

@@ -92,7 +92,10 @@ def varnish_removal(objective: Objective, x, *, layer: str = "varnish", replacem
         return reflectance(st, wl, geometry), reflectance(_without(st, layer, replacement), wl, geometry)
 
     with_layer, without_layer = jax.jit(lambda xs: jax.lax.map(both, xs, batch_size=BLOCK))(jnp.asarray(safe))
-    nan = lambda a: np.where(ok[:, None], np.asarray(a), np.nan)  # noqa: E731
+    def nan(a):  # NaN for the fits not made, whatever axes follow the row (angles, wavelengths, RGB)
+        a = np.asarray(a)
+        return np.where(ok.reshape((-1,) + (1,) * (a.ndim - 1)), a, np.nan)
+
     varnished, removed = nan(with_layer), nan(without_layer)
     srgb = [None, None]
     if colour_space is not None:

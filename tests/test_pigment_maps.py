@@ -136,6 +136,12 @@ def test_varnish_replaced_by_a_fresh_one_and_refusals():
     np.testing.assert_allclose(r.removed[0], np.asarray(want), rtol=1e-12)
     assert np.all(np.isnan(r.removed[1])) and np.all(np.isnan(r.varnished[1]))  # a fit not made
     assert r.srgb_removed is None
+    # an instrument at several angles: (rows, angles, wl), the fit not made NaN at every angle
+    at_angles = ls.Specular(np.array([8.0, 30.0, 60.0]), "R")
+    r3 = ft.varnish_removal(obj, x, geometry=at_angles)
+    assert r3.removed.shape == (2, 3, WL.size) and np.all(np.isnan(r3.removed[1]))
+    bare = ls.Stack(1.0, [], ls.KubelkaMunk(1.5, ls.Mixture(np.array([0.6, 0.2, 0.3]), PIGMENTS)))
+    np.testing.assert_allclose(r3.removed[0], np.asarray(ls.reflectance(bare, WL, at_angles)), rtol=1e-12)
     with pytest.raises(ls.LayerstackError, match=r"no layer named 'glaze'.*layers: 'varnish'"):
         ft.varnish_removal(obj, x, layer="glaze")
     with pytest.raises(ls.LayerstackError, match="must end in the objective's 3 free parameters"):

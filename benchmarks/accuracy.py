@@ -121,7 +121,7 @@ def plain_rule(reversed_stack, lam: float, totals) -> list[float]:
     import jax.numpy as jnp
 
     import layerstack_jax as ls
-    from layerstack_jax._quadrature import plain_gauss_legendre_rule
+    from layerstack_jax._kernels.quadrature import plain_gauss_legendre_rule
 
     rules = [plain_gauss_legendre_rule(int(n)) for n in totals]
     theta = np.arcsin(np.sqrt(np.concatenate([mu for mu, _ in rules])))

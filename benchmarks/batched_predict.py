@@ -1,4 +1,4 @@
-"""Batched prediction through the public path (:func:`layerstack_jax._batched.predict`), standalone:
+"""Batched prediction through the public path (:func:`layerstack_jax._instruments.batched.predict`), standalone:
 
     python -m benchmarks.batched_predict [--n 100000 10000] [--chunk 4] [--step 2048]
 
@@ -52,7 +52,7 @@ def child(n: int, chunk: int, step: int) -> dict:
     import numpy as np
 
     import layerstack_jax as ls
-    from layerstack_jax._batched import predict
+    from layerstack_jax._instruments.batched import predict
 
     from .radiometric import build
 

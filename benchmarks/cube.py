@@ -6,7 +6,7 @@
 The pixel model is benchmark F1's (``benchmarks/fitting_cases.py``): 3 incoherent layers over a
 Lambertian background, sphere 8° SCE, 401 λ; per pixel the top layer's thickness and 3 B-spline
 coefficients of the ink's α(λ) are fitted (4 parameters, Levenberg–Marquardt). The cube
-(``size`` pixels × 401 λ) is made by the forward model (:func:`layerstack_jax._batched.predict`)
+(``size`` pixels × 401 λ) is made by the forward model (:func:`layerstack_jax._instruments.batched.predict`)
 with Gaussian noise σ = 0.002, plus 1 % pixels with a NaN band, and written to a zarr store (float32 on disk,
 as instruments deliver). Then, each compiled once beforehand on one solver chunk so that compile
 time is not counted:
@@ -61,8 +61,8 @@ def main(argv=None) -> dict:
     import fitting
     import layerstack_jax as ls
     from fitting._cube import fit_cube
-    from layerstack_jax._batched import predict
-    from layerstack_jax._cubes import read_zarr, write_zarr_cube
+    from layerstack_jax._instruments.batched import predict
+    from layerstack_jax._files.cubes import read_zarr, write_zarr_cube
 
     from .fitting_cases import SIGMA, WL, _f1_stack
 

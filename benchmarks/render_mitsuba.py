@@ -38,7 +38,7 @@ RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
 
 def fig8_tables(wl, sigma_nm):
-    from layerstack_jax._render_tables import coating_tables
+    from layerstack_jax._appearance.render_tables import coating_tables
 
     def on_grid(book, source):
         n = np.asarray(ls.material(book, source)(wl))

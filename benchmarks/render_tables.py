@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import layerstack_jax as ls  # noqa: E402
-from layerstack_jax._render_tables import coating_tables  # noqa: E402
+from layerstack_jax._appearance.render_tables import coating_tables  # noqa: E402
 
 
 def fig8_stack():

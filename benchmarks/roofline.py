@@ -8,7 +8,7 @@ What is counted
 ---------------
 XLA's cost analysis counts one "flop" per *element* of an elementwise op whatever its dtype (a
 complex multiply is 1, not 6), so the real-arithmetic work of P1 is counted here by hand from
-the formulas the kernel evaluates (``layerstack_jax._fresnel``, ``_coherent``), per
+the formulas the kernel evaluates (``layerstack_jax._kernels.fresnel``, ``_coherent``), per
 (angle, wavelength) point of a stack of F films between two media (F + 2 media, F + 1
 interfaces), in real floating-point operations (complex multiply 6, complex add 2, complex
 divide 11: |w|², z·w̄ and two real divisions, the library's form), a transcendental (complex
@@ -190,8 +190,8 @@ def ceilings(repeats: int) -> dict:
     b, c = jnp.ones(mid), jnp.full(mid, 2.0)
     out["cache_bandwidth_gbs"] = 3 * 8 * mid / _best(triad, b, c, repeats=repeats * 4) / 1e9
 
-    from layerstack_jax._coherent import _phase_factor
-    from layerstack_jax._fresnel import _forward_sqrt, divide
+    from layerstack_jax._kernels.coherent import _phase_factor
+    from layerstack_jax._kernels.fresnel import _forward_sqrt, divide
 
     z = jnp.asarray(np.random.default_rng(1).standard_normal(1 << 20) + 1j * np.random.default_rng(2).standard_normal(1 << 20))
     for name, f in (("csqrt", _forward_sqrt), ("cexp", _phase_factor), ("cdiv", lambda w: divide(1.0, w + 2.0)),
@@ -207,8 +207,8 @@ def micro_kernels(films: int, n_angles: int, n_wl: int, d, n_layers_idx, repeats
     import jax
     import jax.numpy as jnp
 
-    from layerstack_jax._coherent import _film_phase, _phase_factor, _rouard_update
-    from layerstack_jax._fresnel import fresnel_amplitudes, normal_wavevector
+    from layerstack_jax._kernels.coherent import _film_phase, _phase_factor, _rouard_update
+    from layerstack_jax._kernels.fresnel import fresnel_amplitudes, normal_wavevector
 
     wl = jnp.linspace(400.0, 1000.0, n_wl)
     s = jnp.sin(jnp.linspace(0.0, np.deg2rad(80.0), n_angles))[:, None]  # (A, 1)

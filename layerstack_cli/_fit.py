@@ -206,7 +206,7 @@ def _measurement_datasets(m, args, kind: Optional[str] = None) -> tuple[list, st
 
 #: The elements of a normalised Mueller matrix that an isotropic sample's reading determines,
 #: each as (element, Ellipsometric quantity, sign): in the instruments' frame
-#: (:mod:`layerstack_jax._polarimetry`) M/M11 = [[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]],
+#: (:mod:`layerstack_jax._instruments.polarimetry`) M/M11 = [[1, -N, 0, 0], [-N, 1, 0, 0], [0, 0, C, S], [0, 0, -S, C]],
 #: N, C, S the (depolarized, where the model is) reading of :class:`~layerstack_jax.Ellipsometric`.
 _MUELLER_NCS = (("M12", "N", -1.0), ("M21", "N", -1.0), ("M33", "C", 1.0), ("M44", "C", 1.0),
                 ("M34", "S", 1.0), ("M43", "S", -1.0))

@@ -66,7 +66,7 @@ from _figures import ROOT, save  # figures: notebooks/figures/ (tests: NOTEBOOK_
 wl = np.arange(380.0, 781.0, 5.0)  # nm, the grid of the ColorChecker data below
 # Gauss–Legendre nodes per critical-angle segment of the hemispherical integrals. A thick
 # absorbing layer sharpens the integrand near grazing incidence; 64 nodes converge it to ~1e-12
-# (layerstack_jax/_quadrature.py documents the accuracy of the default, ls.DEFAULT_NODES).
+# (layerstack_jax/_kernels/quadrature.py documents the accuracy of the default, ls.DEFAULT_NODES).
 # One node count and one wavelength grid throughout also keep the array shapes, hence JAX's
 # compiled kernels, the same from call to call.
 NODES = 64

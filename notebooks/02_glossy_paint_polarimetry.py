@@ -44,7 +44,7 @@
 #
 # **Units and conventions.** Angles in degrees at the library's polarimetry functions, radians
 # in the closed forms below; BRDFs in 1/sr. The polarimetry module's Stokes basis is (p, s):
-# $Q = I_p - I_s$ (`layerstack_jax/_polarimetry.py`). `ls.polarized_brdf` returns
+# $Q = I_p - I_s$ (`layerstack_jax/_instruments/polarimetry.py`). `ls.polarized_brdf` returns
 # `f[..., a, b, wl]` with a the illumination and b the analyser, each ordered (s, p): `f[..., 1, 0, :]`
 # is Ellis's $f_{ps}$ (p in, s out).
 

@@ -454,7 +454,7 @@ if HAVE_MITSUBA:
 # radiometric BRDF: it is not reciprocal, it stays finite at grazing viewing, and it misses the
 # radiance factor $(n_0/n_N)^2$. The library's default (`form="radiometric"`) keeps the same
 # physics with power transmittances in and out: $k_d = (n_0/n_N)^2\,T_\downarrow(\theta_l)\,\rho\,
-# T_\downarrow(\theta_v)$ (module `layerstack_jax._coated_rough`). Both on the Fig. 8 coating
+# T_\downarrow(\theta_v)$ (module `layerstack_jax._appearance.coated_rough`). Both on the Fig. 8 coating
 # (A/Ag/A on Al), σ0 = 25 and 50 nm, τ = 300 nm: the in-plane $k_d$ at a few incidence angles
 # (averaged over 380–780 nm), the directional albedo $\int k_d\cos\theta_v\,d\omega_v$
 # (Gauss–Legendre in $\cos\theta_v$ and $\varphi$), reciprocity and the value at grazing view.
@@ -707,7 +707,7 @@ inverse = {}
 if HAVE_MITSUBA and "_ad_" in VARIANT:
     import scipy.optimize
 
-    from layerstack_jax._render_tables import angle_grid
+    from layerstack_jax._appearance.render_tables import angle_grid
     from layerstack_jax.render import coating_table_values, render_vjp
 
     D_TRUE, D_START = 350.0, 310.0

@@ -7,7 +7,7 @@
   selects a longer, randomized profile for local exploration.
 * Strict dtype promotion (``jax_numpy_dtype_promotion = "strict"``, as optimistix/equinox test)
   for the whole suite: no implicit mixing of float32/float64/complex/int arrays in the library;
-  the intended real → complex steps are written out (``layerstack_jax._numerics.as_complex``,
+  the intended real → complex steps are written out (``layerstack_jax._base.numerics.as_complex``,
   ``complex_from``). Users keep JAX's standard promotion (the package never changes it).
 * ``tests/`` and the repository root are put on ``sys.path`` so that ``import reference`` and
   ``import layerstack_jax`` work from any working directory without an installed package.

@@ -25,8 +25,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("layerstack_jax", "fitting", "layerstack_cli", "benchmarks")
-GEOMETRY_CLASSES = {"Sphere": "_geometry.py", "Directional": "_geometry.py", "BRDF": "_geometry.py",
-                    "Specular": "_geometry.py", "Ellipsometric": "_ellipsometry.py"}
+GEOMETRY_CLASSES = {"Sphere": "geometry.py", "Directional": "geometry.py", "BRDF": "geometry.py",
+                    "Specular": "geometry.py", "Ellipsometric": "ellipsometry.py"}
 
 
 def _modules(package: str) -> dict[str, Path]:
@@ -114,8 +114,8 @@ def test_fitting_and_cli_use_public_physics_only(package):
 
 def test_the_private_use_check_can_fail():
     """The check above finds each form of reaching into the physics' internals."""
-    source = ("import layerstack_jax as ls\nfrom layerstack_jax._stack import resolve\n"
-              "from layerstack_jax import _batched, Stack\nimport layerstack_jax._progress\nls._validate.warn_if\n"
+    source = ("import layerstack_jax as ls\nfrom layerstack_jax._stacks.stack import resolve\n"
+              "from layerstack_jax._instruments import batched as _batched, Stack\nimport layerstack_jax._base.progress\nls._validate.warn_if\n"
               "from layerstack_jax import Stack\nfrom layerstack_jax.io import load_stack\nls.Stack\n")
     found = _private_uses_of_layerstack_jax(source, "probe")
     assert [f.split(":")[1].split()[0] for f in found] == ["2", "3", "4", "5"], found
@@ -224,7 +224,7 @@ _ROLE_TABLE = re.compile(r"""\(\s*["'](Layer|Index|Cauchy|Sellmeier|LambertianBa
 
 def test_leaf_roles_come_from_field_declarations_only():
     """Leaf roles (batch axes, fixed optics, per-wavelength fit, stack-file key) are declared on the
-    fields (``layerstack_jax._leaves.leaf``), not kept in tables elsewhere: no ``("Layer",
+    fields (``layerstack_jax._base.leaves.leaf``), not kept in tables elsewhere: no ``("Layer",
     "thickness")``-style (class name, field) pairs and no path tests on ``"reflectance"`` /
     ``"alpha"`` fields outside the modules that define them."""
     bad = []

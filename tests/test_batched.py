@@ -1,4 +1,4 @@
-"""Batched prediction (:func:`layerstack_jax._batched.predict`): equal to a Python loop of single
+"""Batched prediction (:func:`layerstack_jax._instruments.batched.predict`): equal to a Python loop of single
 :func:`layerstack_jax.reflectance` calls for every geometry and every kind of batched leaf,
 documented shapes, clear errors naming the field, jit/grad, one compilation per structure, and
 peak memory that does not grow with the number of spectra (measured in subprocesses)."""
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax._batched import _COMPILED, batch_layout, predict
+from layerstack_jax._instruments.batched import _COMPILED, batch_layout, predict
 
 WL = np.linspace(420.0, 700.0, 6)
 N = 2
@@ -182,7 +182,7 @@ _MEMORY_CHILD = textwrap.dedent("""
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     import layerstack_jax as ls
-    from layerstack_jax._batched import predict
+    from layerstack_jax._instruments.batched import predict
 
     n = int(sys.argv[1])
     wl = np.linspace(400.0, 700.0, 31)

@@ -1,5 +1,5 @@
-"""Smooth films on a rough object (Hirayama §4.2, layerstack_jax/_coated_rough.py) and the
-renderer tables (layerstack_jax/_render_tables.py).
+"""Smooth films on a rough object (Hirayama §4.2, layerstack_jax/_appearance/coated_rough.py) and the
+renderer tables (layerstack_jax/_appearance/render_tables.py).
 
 References, none computed with the code under test:
 * ``ls.specular`` (the smooth stack) for the σ0 → 0 limit;
@@ -21,9 +21,9 @@ import tmm
 from test_he_torrance import ref_D, ref_shadow, ref_sigma
 
 import layerstack_jax as ls
-from layerstack_jax._coated_rough import coated_rough
-from layerstack_jax._he_torrance import he_torrance_brdf
-from layerstack_jax._render_tables import (CoatingTables, angle_grid, coating_tables, interpolate_k_d, interpolate_k_r,
+from layerstack_jax._appearance.coated_rough import coated_rough
+from layerstack_jax._appearance.he_torrance import he_torrance_brdf
+from layerstack_jax._appearance.render_tables import (CoatingTables, angle_grid, coating_tables, interpolate_k_d, interpolate_k_r,
                                            interpolate_k_t)
 
 SILVER = complex(0.05, 4.0)  # ~ Ag at 550 nm (fixed: the tests need no dispersion)

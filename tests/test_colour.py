@@ -1,4 +1,4 @@
-"""Colour (layerstack_jax._colour) against colour-science's own functions and Sharma's published
+"""Colour (layerstack_jax._instruments.colour) against colour-science's own functions and Sharma's published
 CIEDE2000 test data; gradients against central finite differences.
 
 Exact comparison (≤ 1e-10): on the ColorChecker's own grid (380–780 nm, 5 nm) and on colour-science's

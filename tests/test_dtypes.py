@@ -144,7 +144,7 @@ def test_lossless_energy_conservation(precision):
 def test_complex_helpers_match_standard_promotion(precision):
     """``complex_from``/``as_complex`` give the dtype and the values of the implicit promotions
     they replace (``re + 1j * im``, ``real * complex``), computed here under standard promotion."""
-    from layerstack_jax._numerics import as_complex, complex_dtype, complex_from
+    from layerstack_jax._base.numerics import as_complex, complex_dtype, complex_from
 
     rng = np.random.default_rng(3)
     re, im = jnp.asarray(rng.normal(size=5)), jnp.asarray(np.abs(rng.normal(size=(2, 1))))

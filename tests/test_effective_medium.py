@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax._effective_medium import Bruggeman, Looyenga
-from layerstack_jax._oscillators import Lorentz
+from layerstack_jax._media.effective_medium import Bruggeman, Looyenga
+from layerstack_jax._media.oscillators import Lorentz
 
 WL = np.linspace(250.0, 1000.0, 7)
 

@@ -21,7 +21,7 @@ import tmm
 
 import fitting as ft
 import layerstack_jax as ls
-from layerstack_jax._ellipsometry import wrap_degrees
+from layerstack_jax._instruments.ellipsometry import wrap_degrees
 
 ANGLES = (65.0, 70.0, 75.0)
 WL = np.linspace(400.0, 820.0, 43)

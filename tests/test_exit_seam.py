@@ -60,7 +60,7 @@ def test_roles_of_a_new_exit_come_from_its_field_declarations():
 
 
 def test_a_new_exit_is_batchable_with_the_optics_computed_once():
-    from layerstack_jax._batched import _optics_fixed_by, batch_layout
+    from layerstack_jax._instruments.batched import _optics_fixed_by, batch_layout
 
     albedo = np.array([[0.1], [0.5], [0.9]])
     stack = _stack(GreyBody(ls.Index(1.5), albedo))

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax import _coherent
+from layerstack_jax._kernels import coherent as _coherent
 from _helpers import relative_error
 
 WL = jnp.array([400.0, 533.0, 650.0, 780.0])

@@ -89,8 +89,8 @@ def test_oscillator_and_roughness_parameters_are_fittable():
     VASE (N, C, S at 60° and 70°) recovers thickness, band gap, amplitude of the film and the
     void fraction of the rough layer from a start 10–20 % off: the fitting objective reaches
     the leaves of the new materials."""
-    from layerstack_jax._effective_medium import Bruggeman
-    from layerstack_jax._oscillators import TaucLorentz
+    from layerstack_jax._media.effective_medium import Bruggeman
+    from layerstack_jax._media.oscillators import TaucLorentz
 
     def stack(d, Eg, A, void):
         tl = TaucLorentz(Eg=Eg, A=A, E0=4.5, C=1.5, eps_inf=1.8)

@@ -307,7 +307,7 @@ def test_grad_inside_jit_of_a_fit_objective():
 
 
 # ----------------------------------------------------------------------------------------------
-# closed-form derivative of the hemispherical adding sums (layerstack_jax._adding_sums)
+# closed-form derivative of the hemispherical adding sums (layerstack_jax._kernels.adding_sums)
 # ----------------------------------------------------------------------------------------------
 def _mixed_over_background(h, alpha, n_mid):
     layers = [
@@ -344,9 +344,9 @@ def test_closed_form_adding_derivative_equals_generic_autodiff():
 
 
 def _random_sums_case(rng, n_layers, node=7, wl=5):
-    """Physical random inputs for layerstack_jax._adding_sums.hemispherical_sums: packets with
+    """Physical random inputs for layerstack_jax._kernels.adding_sums.hemispherical_sums: packets with
     R + T <= 1 on each side, slant paths with some nodes past the layer's critical angle."""
-    from layerstack_jax._coherent import PacketIntensities
+    from layerstack_jax._kernels.coherent import PacketIntensities
 
     def packet():
         R_f, R_b = rng.uniform(0.0, 0.9, (2, 2, node, 1))
@@ -367,7 +367,7 @@ def test_adding_sums_closed_form_equals_generic_jvp_for_every_input_shape():
     automatic derivative of the same sweep (`_plain`), for thicknesses that are scalars, spectra
     (wl,) or vary per node (node, wl); α None, scalar or a spectrum; light from either side; with
     and without transmittance; 1 to 4 thick layers. Forward and reverse mode, to 1e-12 relative."""
-    from layerstack_jax import _adding_sums as S
+    from layerstack_jax._kernels import adding_sums as S
 
     rng = np.random.default_rng(7)
     node, wl = 7, 5
@@ -400,7 +400,7 @@ def test_adding_sums_closed_form_equals_generic_jvp_for_every_input_shape():
 def test_adding_sums_derivative_against_finite_differences():
     """One random 3-layer case, both sides: d(r, t)/dh and d(r, t)/dα of the closed form against
     central differences of the primal (1e-6 relative to each column's largest entry)."""
-    from layerstack_jax import _adding_sums as S
+    from layerstack_jax._kernels import adding_sums as S
 
     rng = np.random.default_rng(11)
     packets, paths, w, wavelength = _random_sums_case(rng, 3)

@@ -85,7 +85,7 @@ def test_links_between_pages_lead_somewhere():
 
 def test_stated_numbers_are_the_code_s(monkeypatch):
     from layerstack_cli import _predict
-    from layerstack_jax import _programs
+    from layerstack_jax._base import programs as _programs
 
     assert _programs.CACHE_MAX_BYTES == 2 ** 30 and "limited to 1 GiB" in GUIDE
     monkeypatch.delenv("LAYERSTACK_CACHE_DIR", raising=False)

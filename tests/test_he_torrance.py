@@ -1,4 +1,4 @@
-"""He–Torrance rough boundary (layerstack_jax/_he_torrance.py).
+"""He–Torrance rough boundary (layerstack_jax/_appearance/he_torrance.py).
 
 References, none computed with the code under test:
 * an independent implementation of He et al. (1991) written here with numpy/scipy: the
@@ -23,7 +23,7 @@ import tmm
 from scipy import optimize, special
 
 import layerstack_jax as ls
-from layerstack_jax._he_torrance import he_torrance_brdf, lambert_w0, series_terms
+from layerstack_jax._appearance.he_torrance import he_torrance_brdf, lambert_w0, series_terms
 
 # ----------------------------------------------------------------------------- reference
 

@@ -20,9 +20,9 @@ from scipy import integrate
 
 import fitting as ft
 import layerstack_jax as ls
-from layerstack_jax import _geometry as G
-from layerstack_jax._stack import resolve
-from layerstack_jax._instrument import GAP_NM, cap_measure, cone_projected_solid_angle, cone_rule
+from layerstack_jax._instruments import geometry as G
+from layerstack_jax._stacks.stack import resolve
+from layerstack_jax._instruments.instrument import GAP_NM, cap_measure, cone_projected_solid_angle, cone_rule
 
 WL = np.array([420.0, 550.0, 680.0])
 GRID = jnp.asarray(WL)
@@ -47,20 +47,20 @@ VARNISH = ls.Stack(1.0, [ls.Layer(1.52, 20_000.0, coherent=False, alpha=2e-5)], 
 # ------------------------------------------------------------------ the ideal instrument, bit for bit
 def _old_sphere(rs, g, nodes):
     """The ideal sphere's reading as written before issue 15 (Simonot eqs. 69, 78)."""
-    front = ls._response.join_interfaces(rs, G._incidence(rs, g.incidence_deg), both_sides=False)
+    front = ls._stacks.recursion.join_interfaces(rs, G._incidence(rs, g.incidence_deg), both_sides=False)
     o = G._optics(g, rs, None, None, *G._back_hemisphere(rs, nodes), nodes=nodes)
     d, rho = G._diffuse_back(rs, o), rs.rho_g
-    total = d.t * rho * ls._response.natural(front.T_front) / (1.0 - rho * d.r)
-    return total + ls._response.natural(front.R_front) if g.specular == "included" else total
+    total = d.t * rho * ls._stacks.recursion.natural(front.T_front) / (1.0 - rho * d.r)
+    return total + ls._stacks.recursion.natural(front.R_front) if g.specular == "included" else total
 
 
 def _old_directional(rs, g, nodes):
-    front = ls._response.join_interfaces(rs, G._incidence(rs, g.incidence_deg), both_sides=False)
-    view = ls._response.join_interfaces(rs, G._incidence(rs, g.viewing_deg), both_sides=False)
+    front = ls._stacks.recursion.join_interfaces(rs, G._incidence(rs, g.incidence_deg), both_sides=False)
+    view = ls._stacks.recursion.join_interfaces(rs, G._incidence(rs, g.viewing_deg), both_sides=False)
     o = G._optics(g, rs, None, None, *G._back_hemisphere(rs, nodes), nodes=nodes)
     d, rho = G._diffuse_back(rs, o), rs.rho_g
-    ratio = ls._fresnel.exit_medium_ratio(rs.n[0], rs.n[-1])
-    nat = ls._response.natural
+    ratio = ls._kernels.fresnel.exit_medium_ratio(rs.n[0], rs.n[-1])
+    nat = ls._stacks.recursion.natural
     return ratio * nat(front.T_front) * nat(view.T_front) * rho / (1.0 - rho * d.r)
 
 
@@ -237,7 +237,7 @@ def test_sphere_multiplier_over_a_substrate_and_errors():
     g = ls.Sphere(8.0, "included", wall_reflectance=0.98, sample_port_fraction=0.04, reference_reflectance=0.5)
     np.testing.assert_allclose(g.measure(sub, WL, nodes=NODES), _substitution_closed_form(sub, ideal, 0.98, 0.04, 0.0, 0.5),
                                rtol=0, atol=1e-12)
-    from layerstack_jax._instrument import substituted_reading
+    from layerstack_jax._instruments.instrument import substituted_reading
     assert float(substituted_reading(0.42, 0.42, 0.98, 0.05, 0.01, 0.42)) == pytest.approx(0.42, rel=1e-15)
     with pytest.raises(ls.LayerstackError, match="wall_reflectance"):
         ls.Sphere(8.0, sample_port_fraction=0.03)

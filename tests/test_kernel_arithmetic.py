@@ -8,8 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax._coherent import _cos_sin
-from layerstack_jax._fresnel import _forward_sqrt, divide
+from layerstack_jax._kernels.coherent import _cos_sin
+from layerstack_jax._kernels.fresnel import _forward_sqrt, divide
 
 
 def test_cos_sin_matches_numpy():

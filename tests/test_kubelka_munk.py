@@ -143,8 +143,8 @@ def _k2_quad(n0, n1):
 
 
 def _k2_library(n_g):
-    from layerstack_jax._illumination import diffuse_resolved
-    from layerstack_jax._stack import resolve
+    from layerstack_jax._stacks.illumination import diffuse_resolved
+    from layerstack_jax._stacks.stack import resolve
 
     rs = resolve(ls.Stack(1.0, [], ls.LambertianBackground(n_g, 0.5)), WL)
     return float(np.asarray(diffuse_resolved(rs, "back", ls.DEFAULT_NODES).r).ravel()[0])

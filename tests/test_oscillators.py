@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import quad
 
 import layerstack_jax as ls
-from layerstack_jax._oscillators import HC_EV_NM, CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
+from layerstack_jax._media.oscillators import HC_EV_NM, CauchyUrbach, CodyLorentz, Drude, Lorentz, TaucLorentz
 
 WL = np.linspace(190.0, 1700.0, 41)
 E = HC_EV_NM / WL

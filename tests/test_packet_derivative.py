@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax import _coherent
-from layerstack_jax._fresnel import reciprocal
+from layerstack_jax._kernels import coherent as _coherent
+from layerstack_jax._kernels.fresnel import reciprocal
 from _helpers import relative_error
 
 

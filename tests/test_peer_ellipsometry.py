@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax._effective_medium import Bruggeman
-from layerstack_jax._oscillators import TaucLorentz
+from layerstack_jax._media.effective_medium import Bruggeman
+from layerstack_jax._media.oscillators import TaucLorentz
 
 WL = np.array([250.0, 400.0, 550.0, 633.0, 800.0, 1200.0])
 ANGLES = np.array([0.0, 45.0, 55.0, 65.0, 70.0, 75.0])

@@ -1,4 +1,4 @@
-"""One compiled program per public call (``layerstack_jax._programs``), and the unit slips that
+"""One compiled program per public call (``layerstack_jax._base.programs``), and the unit slips that
 used to end in a silent wrong spectrum (issue "the first hour").
 
 Compilations are counted with JAX's own compile events (``/jax/core/compile/backend_compile_duration``,

@@ -333,7 +333,7 @@ def test_jit_and_eager_quadrature_layouts_agree():
 def _full_and_pruned(st, wl, side, nodes=16):
     """Diffuse (r, t) joined over every packet at every node, and as pruned by the plan; the plan.
     Under jit with the stack closed over: its indices stay concrete, so the plan is static."""
-    from layerstack_jax import _illumination as G
+    from layerstack_jax._stacks import illumination as G
 
     plan = G.hemisphere(G.resolve(st, wl), side, nodes)[2]
 
@@ -380,7 +380,7 @@ def test_segments_beyond_an_evanescent_thick_medium_skip_the_layers_behind_it():
 def test_no_pruning_behind_an_absorbing_medium_or_under_jit():
     """A thick medium of complex index still takes power past its 'critical angle' (Re q > 0):
     no segment is cut there; with traced indices the layout is not static: no plan at all."""
-    from layerstack_jax import _illumination as G
+    from layerstack_jax._stacks import illumination as G
 
     # from 1.6: air 0.39 (no T beyond), 1.4 + 1e-4i 0.77 (no cut), 1.5 0.88 (cut: only the
     # 1.6|1.4 interface and the 1.4 layer before the 1.4|1.5 one remain)

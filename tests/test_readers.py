@@ -1,4 +1,4 @@
-"""Instrument-file readers and the Measurement object (layerstack_jax._readers, _measurement).
+"""Instrument-file readers and the Measurement object (layerstack_jax._files.readers, _measurement).
 
 References, independent of the code under test:
 * numbers copied by hand from the files' text (first/last rows) and the sources' own tests
@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax._measurement import Measurement, component_names
-from layerstack_jax._readers import (
+from layerstack_jax._files.measurement import Measurement, component_names
+from layerstack_jax._files.readers import (
     HC_EV_NM,
     read_accurion,
     read_jcamp,
@@ -33,7 +33,7 @@ from layerstack_jax._readers import (
     wavelength_to_nm,
     write_measurement_csv,
 )
-from layerstack_jax._validate import LayerstackError
+from layerstack_jax._base.validate import LayerstackError
 
 DATA = Path(__file__).resolve().parents[1] / "examples" / "data"
 WVASE_GLASS = DATA / "woollam_wvase_glass.dat"

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import RegularGridInterpolator
 
-from layerstack_jax._validate import LayerstackError
+from layerstack_jax._base.validate import LayerstackError
 from layerstack_jax.render._lookup import DEFENSIVE, CoatingTables, TableSurface, _azimuth
 
 

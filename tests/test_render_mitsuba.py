@@ -36,7 +36,7 @@ mi = pytest.importorskip("mitsuba")
 import jax  # noqa: E402
 
 import layerstack_jax as ls  # noqa: E402
-from layerstack_jax._validate import LayerstackError  # noqa: E402
+from layerstack_jax._base.validate import LayerstackError  # noqa: E402
 from layerstack_jax.render import CoatingTables, coated_bsdf  # noqa: E402
 from layerstack_jax.render._llvm import llvm_problem  # noqa: E402
 
@@ -493,7 +493,7 @@ def test_image_gradient_matches_central_differences(case):
     them is the quotient's truncation (O(h²), h = 0.5 nm) and float32 rounding, far below the
     gradient's own Monte-Carlo error — the spread between two seeds, asserted to be larger than
     the tolerance (3e-3) so that the comparison is not vacuous."""
-    from layerstack_jax._render_tables import angle_grid
+    from layerstack_jax._appearance.render_tables import angle_grid
     from layerstack_jax.render import coating_table_values, render_vjp
 
     _use("llvm_ad_spectral")

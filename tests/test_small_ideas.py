@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax import _custom_types
-from layerstack_jax._coherent import PacketIntensities
-from layerstack_jax._fresnel import exit_medium_ratio
-from layerstack_jax._illumination import snell_invariant, snell_invariant_from_cos
-from layerstack_jax._incoherent import add_layer, add_layers
-from layerstack_jax._numerics import (abs2, safe_abs, safe_atan2, safe_divide, safe_divide_nonzero, safe_reciprocal,
+from layerstack_jax._base import custom_types as _custom_types
+from layerstack_jax._kernels.coherent import PacketIntensities
+from layerstack_jax._kernels.fresnel import exit_medium_ratio
+from layerstack_jax._stacks.illumination import snell_invariant, snell_invariant_from_cos
+from layerstack_jax._kernels.incoherent import add_layer, add_layers
+from layerstack_jax._base.numerics import (abs2, safe_abs, safe_atan2, safe_divide, safe_divide_nonzero, safe_reciprocal,
                                       safe_sqrt, sin_from_cos)
 
 PACKAGE = Path(__file__).resolve().parents[1] / "layerstack_jax"
@@ -32,7 +32,7 @@ def _central_difference(f, x, h):
 
 
 # --------------------------------------------------------------------------- atan2
-# The two copies this replaces (layerstack_jax/_colour.py and _ellipsometry.py) differed only in
+# The two copies this replaces (layerstack_jax/_instruments/colour.py and _ellipsometry.py) differed only in
 # the dummy point fed to arctan2 at the origin: (y, x) = (0, 1) and (1, 1).
 _SIGNED = np.array([-2.5, -1.0, -1e-300, -0.0, 0.0, 1e-300, 1e-3, 1.0, 3.0])
 
@@ -164,16 +164,16 @@ def test_stack_response_joins_through_add_layers_like_the_closed_form():
 # --------------------------------------------------------------------------- aliases
 def test_custom_types_keeps_only_used_aliases_and_no_index_clash():
     assert not hasattr(_custom_types, "Index")  # ls.Index is the material class
-    assert isinstance(ls.Index, type) and ls.Index.__module__ == "layerstack_jax._materials"
+    assert isinstance(ls.Index, type) and ls.Index.__module__ == "layerstack_jax._media.materials"
     for name in _custom_types.__all__:
         assert hasattr(_custom_types, name)
     used = set()
     for path in PACKAGE.rglob("*.py"):
-        if path.name == "_custom_types.py":
+        if path.name == "custom_types.py":
             continue
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.module and node.module.endswith("_custom_types"):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.endswith("custom_types"):
                 used |= {a.name for a in node.names}
     aliases = {"RealLike", "ComplexLike", "Spectrum", "Wavelengths", "IndexSpectrum"}
     assert aliases <= set(_custom_types.__all__)
@@ -188,12 +188,12 @@ _PENDING: set = set()  # modules whose local copy is still to be replaced (none 
 
 
 def _module_params():
-    for path in sorted(PACKAGE.glob("*.py")):
-        if path.name == "_numerics.py":
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "numerics.py":
             continue
         pending = path.name in _PENDING
         marks = [pytest.mark.xfail(strict=True, reason="local copy still to be replaced")] if pending else []
-        yield pytest.param(path, id=path.name, marks=marks)
+        yield pytest.param(path, id=str(path.relative_to(PACKAGE)), marks=marks)
 
 
 @pytest.mark.parametrize("path", list(_module_params()))
@@ -203,6 +203,6 @@ def test_small_helpers_are_defined_once(path):
     dup = {n for n in names if n.lstrip("_") in {"safe_atan2", "safe_sqrt", "safe_abs", "safe_divide", "abs2",
                                                  "safe_divide_complex", "safe_reciprocal", "sin", "exit_ratio",
                                                  "check_angles_deg", "check_angle_deg"}}
-    if path.name == "_validate.py":
+    if path.name == "validate.py":
         dup.discard("check_angle_deg")  # its home
-    assert not dup, f"{path.name} defines its own {sorted(dup)}: use layerstack_jax._numerics, _fresnel or _validate"
+    assert not dup, f"{path.name} defines its own {sorted(dup)}: use layerstack_jax._base.numerics, _kernels.fresnel or _base.validate"

@@ -95,8 +95,8 @@ def test_a_key_the_geometry_lacks_is_refused_naming_it_and_the_geometry(tmp_path
 def test_cli_fit_recovers_a_declared_angle_offset(tmp_path):
     """``layerstack fit MODEL.toml FILE`` with ``angle_offset_deg`` free in ``[instrument]``: ψ/Δ
     at 65/70/75° made at the true angles + 0.3° (and 123.4 nm) fit back to both values."""
-    from layerstack_jax._measurement import measurement_from_points
-    from layerstack_jax._readers import write_measurement_csv
+    from layerstack_jax._files.measurement import measurement_from_points
+    from layerstack_jax._files.readers import write_measurement_csv
 
     wl = np.linspace(400.0, 800.0, 41)
     stack = ls.Stack(1.0, [ls.Layer(ls.Cauchy(1.46, 0.0035), 123.4, name="film")], ls.Substrate(ls.Index(3.87, 0.02)))

@@ -3,7 +3,7 @@
 A model's wavelength grid is fixed while a fit or a design varies thicknesses and
 coefficients. Material tables (``Tabulated``, database pages, a formula page's k table) are
 interpolated on it in numpy when the grid is concrete
-(:func:`layerstack_jax._materials.interpolate_table`): the compiled model holds the sampled
+(:func:`layerstack_jax._media.materials.interpolate_table`): the compiled model holds the sampled
 index — no interval search (``jnp.interp``'s while loops) compiled into it or run at every
 solver step. Checked here against ``np.interp`` and ``jnp.interp`` (values, and the
 gradient with respect to the table values), on exact nodes and both ends, with the grid
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import layerstack_jax as ls
-from layerstack_jax._materials import interpolate_table
+from layerstack_jax._media.materials import interpolate_table
 
 TABLE_WL = np.array([300.0, 420.0, 500.0, 650.0, 900.0])
 TABLE_N = np.array([1.62, 1.58, 1.55, 1.53, 1.51])
@@ -90,7 +90,7 @@ def test_compiled_model_on_a_fixed_grid_holds_no_table_search(exit_):
 def test_database_formula_page_k_table_on_a_concrete_grid():
     """A formula page with a tabulated k (refractiveindex.info "formula + tabulated k"): k
     sampled in numpy on a concrete grid equals ``np.interp`` of the page's k column."""
-    from layerstack_jax._database import DatabaseFormula
+    from layerstack_jax._media.database import DatabaseFormula
 
     kw = (400.0, 600.0, 800.0)
     m = DatabaseFormula(kind=1, coefficients=(0.0, 1.0, 0.01), range_nm=(400.0, 800.0), k_wavelength_nm=kw,

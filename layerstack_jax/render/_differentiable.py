@@ -31,8 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._render_tables import _diffuse_block, _specular_tables
-from .._validate import LayerstackError
+from .._appearance.render_tables import _diffuse_block, _specular_tables
+from .._base.validate import LayerstackError
 from ._mitsuba import import_mitsuba
 
 __all__ = ["coating_table_values", "render_vjp"]

@@ -20,7 +20,7 @@ import os
 import re
 import sys
 
-from .._validate import LayerstackError
+from .._base.validate import LayerstackError
 
 __all__ = ["MIN_LLVM", "find_llvm", "configure", "llvm_problem", "require_llvm", "best_variant"]
 

@@ -10,7 +10,7 @@ tested without Mitsuba.
 The surface model is Hirayama's eq. (8): a specular (mirror-direction, delta) reflectance
 :math:`k_r(\theta_i, \lambda)` plus a diffuse BRDF :math:`k_d(\omega_i, \omega_o, \lambda)`
 (1/sr, natural light, specular delta excluded). The tables are those of the
-``CoatingTables`` contract of :mod:`layerstack_jax._render_tables` (duck-typed here):
+``CoatingTables`` contract of :mod:`layerstack_jax._appearance.render_tables` (duck-typed here):
 
 ======================  ============  ==================================================
 field                   shape         meaning
@@ -25,7 +25,7 @@ field                   shape         meaning
 ``k_d``                 (A, B, P, L)  diffuse BRDF, 1/sr
 ======================  ============  ==================================================
 
-**Azimuth convention** (that of :mod:`layerstack_jax._render_tables`). φ is measured from the
+**Azimuth convention** (that of :mod:`layerstack_jax._appearance.render_tables`). φ is measured from the
 forward (specular) side of the plane of incidence and folded into [0, π]: φ = 0 is the mirror
 direction's azimuth, φ = π back towards the source. With Mitsuba's outward ``wi`` and ``wo``,
 φ is the angle between the surface projections of ``wo`` and of the mirror direction of ``wi``
@@ -63,8 +63,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._render_tables import CoatingTables  # the one table type (re-exported here)
-from .._validate import LayerstackError
+from .._appearance.render_tables import CoatingTables  # the one table type (re-exported here)
+from .._base.validate import LayerstackError
 
 __all__ = ["CoatingTables", "TableSurface", "SurfaceArrays", "DEFENSIVE"]
 

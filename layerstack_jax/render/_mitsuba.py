@@ -47,7 +47,7 @@ import itertools
 import threading
 import time
 
-from .._validate import LayerstackError
+from .._base.validate import LayerstackError
 from ._llvm import configure as _configure_llvm
 from ._llvm import require_llvm
 from ._lookup import TableSurface

@@ -28,7 +28,7 @@ import tempfile
 
 import numpy as np
 
-from .._validate import LayerstackError
+from .._base.validate import LayerstackError
 from ._mitsuba import import_mitsuba
 
 __all__ = ["fluorescent_spectrum", "teapot_mesh", "write_ply", "fig8_scene", "fig9_scene", "lamp_emitters", "camera"]

@@ -33,9 +33,10 @@ def _modules(package: str) -> dict[str, Path]:
     return {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in (ROOT / package).rglob("*.py")}
 
 
-def _imports(path: Path, module: str, *, top_level_only: bool) -> set[str]:
-    """Absolute names of the modules ``path`` imports (relative imports resolved)."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+def _imports(path: Path, module: str, *, top_level_only: bool, source: str | None = None) -> set[str]:
+    """Absolute names of the modules ``path`` (or ``source``, written there) imports (relative
+    imports resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8") if source is None else source)
     nodes = tree.body if top_level_only else list(ast.walk(tree))
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     out = set()
@@ -119,6 +120,47 @@ def test_the_private_use_check_can_fail():
               "from layerstack_jax import Stack\nfrom layerstack_jax.io import load_stack\nls.Stack\n")
     found = _private_uses_of_layerstack_jax(source, "probe")
     assert [f.split(":")[1].split()[0] for f in found] == ["2", "3", "4", "5"], found
+
+
+# The floors of layerstack_jax, bottom up, and what each may import (its __init__ docstring says
+# the same): a floor imports only floors below it; the top (the package's __init__, io, cli,
+# render) may import any.
+FLOORS = {
+    "_base": set(),
+    "_kernels": {"_base"},
+    "_media": {"_base"},
+    "_stacks": {"_base", "_kernels", "_media"},
+    "_instruments": {"_base", "_kernels", "_media", "_stacks"},
+    "_appearance": {"_base", "_kernels", "_media", "_stacks"},
+    "_files": {"_base", "_media", "_stacks"},
+}
+
+
+def _floor_violations(modules: dict, source: str | None = None) -> list[str]:
+    bad = []
+    for module, path in modules.items():
+        parts = module.split(".")
+        if len(parts) < 3 or parts[1] not in FLOORS:
+            continue
+        for name in _imports(path, module, top_level_only=False, source=source):
+            target = name.split(".")
+            if target[0] != "layerstack_jax" or len(target) < 2 or target[1] == parts[1]:
+                continue
+            if target[1] not in FLOORS[parts[1]]:
+                bad.append(f"{path.relative_to(ROOT)} imports {name} (floor {target[1]} is not below {parts[1]})")
+    return bad
+
+
+def test_every_floor_imports_only_floors_below_it():
+    modules = _modules("layerstack_jax")
+    floors = {p.name for p in (ROOT / "layerstack_jax").iterdir() if (p / "__init__.py").exists()} - {"render"}
+    assert floors == set(FLOORS), "a new subpackage of layerstack_jax needs its place in FLOORS"
+    flat = {p.name for p in (ROOT / "layerstack_jax").glob("*.py")}
+    assert flat == {"__init__.py", "io.py", "cli.py"}, f"modules outside the floors: {sorted(flat)}"
+    assert not _floor_violations(modules), "\n".join(_floor_violations(modules))
+    # the check can fail: a kernel importing a stack is found
+    probe = {"layerstack_jax._kernels.fresnel": ROOT / "layerstack_jax" / "_kernels" / "fresnel.py"}
+    assert _floor_violations(probe, source="def f():\n    from .._stacks.stack import Stack\n")
 
 
 def test_no_import_cycles():

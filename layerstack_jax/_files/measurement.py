@@ -61,13 +61,6 @@ def component_names(quantity: str) -> tuple[str, ...]:
     raise LayerstackError(f"Measurement.quantity must be one of {QUANTITIES}, got {quantity!r}")
 
 
-def _as_float_array(name: str, x, ndim: Optional[int] = None) -> np.ndarray:
-    a = np.asarray(x, dtype=float)
-    if ndim is not None and a.ndim != ndim:
-        raise LayerstackError(f"Measurement.{name} must have {ndim} dimension(s), got shape {a.shape}")
-    return a
-
-
 class Measurement(eqx.Module):
     """One measurement read from an instrument file, in the library's units (module docstring).
 

@@ -60,7 +60,7 @@ those points the gradients are exact.
 from __future__ import annotations
 
 import difflib
-from typing import Optional, Union
+from typing import Optional
 
 import equinox as eqx
 import jax.numpy as jnp

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._base.custom_types import Coefficients, TableColumn
-from .._base.validate import LayerstackError, check_nonnegative, check_wavelength_range, is_concrete
+from .._base.validate import LayerstackError, check_nonnegative, check_wavelength_range
 from .materials import Material, Tabulated, _complex, interpolate_table
 
 __all__ = ["material", "material_sources", "DatabaseFormula", "database_version"]

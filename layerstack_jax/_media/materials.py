@@ -11,7 +11,7 @@ literature and the refractiveindex.info database; the call itself takes nanometr
 
 from __future__ import annotations
 
-from typing import Callable, Optional, Union
+from typing import Optional
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -176,9 +176,6 @@ class Tabulated(Material):
         n = interpolate_table(x, table, self.n)
         k = 0.0 if self.k is None else interpolate_table(x, table, self.k)
         return _complex(n, k)
-
-
-MaterialLike = Union[Material, complex, float, int, Callable]
 
 
 def as_material(x) -> Material:

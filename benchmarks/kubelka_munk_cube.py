@@ -147,7 +147,7 @@ def main(argv=None) -> dict:
     outdir.mkdir(parents=True, exist_ok=True)
     (outdir / f"{stem}.json").write_text(json.dumps(res, indent=1))
     md = "\n".join([
-        f"# K2: a varnished painting's cube into pigment maps — fit_cube (zarr) vs fit_batch (memory) (issue 28)",
+        "# K2: a varnished painting's cube into pigment maps — fit_cube (zarr) vs fit_batch (memory) (issue 28)",
         "",
         f"Run {res['when']} (git {res['git']}), {res['machine']}, Python {res['versions']['python']}, "
         f"jax {res['versions']['jax']} CPU, {res['precision']}. CPUs available: {res['cpus_used']} (not pinned). "

@@ -42,9 +42,9 @@ _MAX_POLL_S = 0.2
 
 #: Pause between two polls as a fraction of the time waited so far (and at least
 #: :data:`_MIN_POLL_S`): a result is read back at most this fraction of its computing time late.
-#: The polls then number about ln(wait / _MIN_POLL_S) / _POLL_FRACTION (~350 for a 1 s solve,
-#: each a few microseconds), where pauses that doubled each time left a result of a solve
-#: that takes ~1 s waiting up to 0.2 s (fit_batch runs one such solve per chunk).
+#: The polls then number about ln(wait / _MIN_POLL_S) / _POLL_FRACTION (~460 for a 1 s solve,
+#: each a few microseconds); a pause that doubled at each poll would leave the result of a ~1 s
+#: solve (one ``fit_batch`` chunk) waiting up to the longest pause.
 _POLL_FRACTION = 0.02
 _MIN_POLL_S = 1e-4
 

@@ -163,7 +163,10 @@ def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
     layout = objective.layout
     x0 = jnp.asarray(layout.x0)
     args = objective.args()
-    J = jax.jit(jax.jacfwd(lambda x, a, o: objective.residuals(x, a, o)))(x0, args, objective.optics)  # one compile
+    jac = objective.cache.get("rank_at_start")  # compiled once per objective, not once per fit_cube call
+    if jac is None:
+        jac = objective.cache["rank_at_start"] = jax.jit(jax.jacfwd(objective.residuals))
+    J = jac(x0, args, objective.optics)
     J = np.asarray(J) * layout.scale[None, :]
     return int(linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)[2])
 
@@ -394,9 +397,9 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
             stderr = r.stderr * (np.sqrt(r.dof / np.maximum(dof, 1))[:, None] if r.covariance_scaled else 1.0)
         verdict = np.zeros(dof.shape, np.int8)
         if s.sigma_given:
-            from scipy.stats import chi2 as chi2_distribution
+            from scipy.special import chdtrc  # the χ² upper tail (scipy.stats.chi2.sf), without importing scipy.stats
 
-            tail = chi2_distribution.sf(r.chi2, np.maximum(dof, 1))
+            tail = chdtrc(np.maximum(dof, 1), r.chi2)
             verdict[~(tail >= (1.0 - CHI2_CENTRAL) / 2)] = 5  # NaN χ² too
         if r.at_bound is not None:
             verdict[(verdict == 0) & np.any(r.at_bound, axis=1)] = 6

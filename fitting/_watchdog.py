@@ -37,9 +37,16 @@ STALL_S = 120.0
 #: uses (tens of microseconds per poll), far below what a running computation uses.
 _MIN_CPU_S = 0.05
 
-#: Longest pause between two polls (seconds); the first polls follow each other quickly, so a
-#: short computation is read back with little delay.
+#: Longest pause between two polls (seconds).
 _MAX_POLL_S = 0.2
+
+#: Pause between two polls as a fraction of the time waited so far (and at least
+#: :data:`_MIN_POLL_S`): a result is read back at most this fraction of its computing time late.
+#: The polls then number about ln(wait / _MIN_POLL_S) / _POLL_FRACTION (~460 for a 1 s solve,
+#: each a few microseconds); a pause that doubled at each poll would leave the result of a ~1 s
+#: solve (one ``fit_batch`` chunk) waiting up to the longest pause.
+_POLL_FRACTION = 0.02
+_MIN_POLL_S = 1e-4
 
 
 def _on_cpu(leaves) -> bool:
@@ -63,11 +70,11 @@ def wait_for(out, *, what: str, stall_s: Optional[float] = STALL_S, deadline: Op
     watch_cpu = stall_s is not None and _on_cpu(leaves)
     start = time.monotonic()
     t_ref, cpu_ref = start, time.process_time()
-    pause = 1e-4
+    pause = _MIN_POLL_S
     while not all(leaf.is_ready() for leaf in leaves):
         time.sleep(pause)
-        pause = min(2 * pause, _MAX_POLL_S)
         now, cpu = time.monotonic(), time.process_time()
+        pause = min(max(_MIN_POLL_S, _POLL_FRACTION * (now - start)), _MAX_POLL_S)
         if cpu - cpu_ref >= _MIN_CPU_S:
             t_ref, cpu_ref = now, cpu
         elif watch_cpu and now - t_ref > stall_s:

@@ -138,3 +138,18 @@ def test_cli_predict_benchmark_tiny(tmp_path, monkeypatch):
     res = cli_predict.main(["--n", "12"])
     assert res["max_abs_diff"] == 0.0
     assert (tmp_path / "cli_predict.md").read_text().count("|") > 10
+
+
+def test_kubelka_munk_fit_runner_tiny(tmp_path):
+    """K1 on 6 pixels: the NumPy yardstick's forward (written from the equations in the
+    benchmark) equals ``ls.predict`` to ≤ 1e-12, and the yardstick and ``fit_batch`` fit the same
+    values (within 0.01 standard errors: both stop within ~1e-3 σ of the minimum); the report
+    renders."""
+    from benchmarks import kubelka_munk_fit
+
+    res = kubelka_munk_fit.main(["--pixels", "6", "--repeats", "1", "--scipy-pixels", "2", "--chunk-size", "6",
+                                 "--no-float32", "--out-dir", str(tmp_path)])
+    assert res["forward_max_abs_diff"] <= 1e-12
+    assert res["ours_float64"]["converged"] == 6 and res["yardstick"]["success"] == 2
+    assert max(res["yardstick"]["max_abs_diff_over_sigma_vs_ours"]) <= 1e-2
+    assert "yardstick: NumPy + scipy" in (tmp_path / "kubelka_munk_fit.md").read_text()

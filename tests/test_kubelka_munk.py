@@ -350,6 +350,37 @@ def test_a_body_in_a_stack_file(tmp_path):
         ls.stack_from_dict({"kubelka_munk": {"n": 1.5, "K_per_nm": 1e-4}})
 
 
+@pytest.mark.parametrize("paint", ["mixture", "paint", "opaque"])
+def test_a_body_saved_and_read_back(tmp_path, paint):
+    """save_stack → load_stack keeps every leaf of a body (pigments with their names, tabulated K,
+    concentrations, thickness, ground) and so its reading; the file has the tables the reader
+    documents (one [[kubelka_munk.pigments]] per pigment)."""
+    stack = _by_hand()
+    if paint == "paint":
+        stack = ls.Stack(1.0, stack.layers, ls.KubelkaMunk(1.5, stack.exit.paint.pigments[1], 30000.0, 0.8))
+    elif paint == "opaque":
+        stack = ls.Stack(1.0, [], ls.KubelkaMunk(1.52, ls.Paint(2e-5, 3e-3, name="white"), None, 0.0))
+    path = ls.save_stack(tmp_path / "body.toml", stack)
+    text = path.read_text()
+    assert text.count("[[kubelka_munk.pigments]]") == (2 if paint == "mixture" else 0)
+    back = ls.load_stack(path)
+    numbers = lambda st: np.concatenate([np.ravel(np.asarray(x, float)) for x in jax.tree_util.tree_leaves(st)])
+    np.testing.assert_array_equal(numbers(back), numbers(stack))  # every number, in the same places
+    assert type(back.exit.paint) is type(stack.exit.paint)
+    if paint == "mixture":
+        assert [p.name for p in back.exit.paint.pigments] == ["white", "red"]
+    g = ls.Directional(45.0, 0.0)
+    np.testing.assert_array_equal(np.asarray(ls.reflectance(back, WL, g)), np.asarray(ls.reflectance(stack, WL, g)))
+
+
+def test_a_mixture_of_a_batch_is_not_written_as_one_body(tmp_path):
+    stack = _by_hand()
+    batched = ls.Stack(1.0, stack.layers, ls.KubelkaMunk(1.5, ls.Mixture(np.array([[0.6, 0.4], [0.5, 0.5]]),
+                                                                          stack.exit.paint.pigments), 3e4, 0.8))
+    with pytest.raises(ls.LayerstackError, match="one mixture"):
+        ls.save_stack(tmp_path / "b.toml", batched)
+
+
 def test_a_body_predicted_and_varied_from_the_command_line(tmp_path):
     from layerstack_cli import main
 

@@ -796,7 +796,8 @@ def stack_to_dict(stack: Stack) -> dict:
     Works for stacks made of scalars, :class:`Index` (scalar), :class:`Cauchy`,
     :class:`Sellmeier`, :class:`Tabulated`, :class:`TabulatedSpectrum`, the dispersion models
     (:class:`TaucLorentz` …) and the effective media (:class:`Bruggeman`, :class:`Looyenga`) of
-    these; raises
+    these, over any exit (a :class:`KubelkaMunk` body's paint writes its own entries: K, S or one
+    ``[[kubelka_munk.pigments]]`` table per pigment of a mixture); raises
     :class:`LayerstackError` for arrays sampled on a grid or traced values.
     """
     d: dict = {"ambient": {}}
@@ -819,11 +820,28 @@ def stack_to_dict(stack: Stack) -> dict:
         value = getattr(stack.exit, f.name)
         if f.name == "index" or f.metadata.get("static") or value is None:
             continue
-        if f.name not in keys:
+        if f.name in keys:
+            d[table][keys[f.name]] = _spectrum_to_dict(value, f"{table} {keys[f.name]}")
+        elif callable(getattr(value, "file_table", None)):  # a part that writes its own entries (a paint)
+            d[table].update(_entries_to_dict(value.file_table(), table))
+        else:
             raise LayerstackError(f"stack_to_dict: the [{table}] field {f.name!r} has no stack-file form here; "
                                   "write this stack's file by hand")
-        d[table][keys[f.name]] = _spectrum_to_dict(value, f"{table} {keys[f.name]}")
     return d
+
+
+def _entries_to_dict(entries: dict, where: str) -> dict:
+    """A part's own stack-file entries (``file_table()``) with their values in file form: numbers
+    and spectra as :func:`_spectrum_to_dict` writes them, lists of tables entry by entry."""
+    out = {}
+    for key, value in entries.items():
+        if isinstance(value, str):
+            out[key] = value
+        elif isinstance(value, list):
+            out[key] = [_entries_to_dict(v, f"{where}.{key}") for v in value]
+        else:
+            out[key] = _spectrum_to_dict(value, f"{where} {key}")
+    return out
 
 
 # --------------------------------------------------------------------------- TOML writer
@@ -872,27 +890,37 @@ def _toml_value(x, what: str) -> str:
     raise LayerstackError(f"save_stack: cannot write {what} of type {type(x).__name__}")
 
 
+def _is_array_of_tables(x) -> bool:
+    return isinstance(x, list) and bool(x) and all(isinstance(v, Mapping) for v in x)
+
+
 def _toml_table(d: Mapping, what: str) -> list[str]:
-    return [f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in d.items()]
+    """The lines of table ``what``: its entries (inline values), then its arrays of tables
+    (``[[what.key]]``, e.g. a Kubelka–Munk body's pigments)."""
+    lines = [f"{_toml_key(k)} = {_toml_value(v, f'{what}.{k}')}" for k, v in d.items() if not _is_array_of_tables(v)]
+    for k, v in d.items():
+        if _is_array_of_tables(v):
+            for item in v:
+                lines += ["", f"[[{what}.{_toml_key(k)}]]", *_toml_table(item, f"{what}.{_toml_key(k)}")]
+    return lines
 
 
 def _dumps_stack(d: Mapping, header: str = "") -> str:
     """A stack dict (schema in the module docstring, e.g. from :func:`stack_to_dict`) as TOML
-    text, ``header`` written first as ``#`` comment lines."""
+    text, ``header`` written first as ``#`` comment lines: top-level values, then every table
+    (``[ambient]``, ``[[layers]]``, the exit's table …) in the dict's order."""
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
     if lines:
         lines.append("")
     for key, value in d.items():
-        if not isinstance(value, (Mapping, list)) or (isinstance(value, list) and key != "layers"):
+        if not isinstance(value, Mapping) and not _is_array_of_tables(value):
             lines.append(f"{_toml_key(key)} = {_toml_value(value, key)}")
-    for key in ("ambient", "layers", "substrate", "background"):
-        if key not in d:
-            continue
-        if key == "layers":
-            for layer in d["layers"]:
-                lines += ["", "[[layers]]", *_toml_table(layer, "layers")]
-        else:
-            lines += ["", f"[{key}]", *_toml_table(d[key], key)]
+    for key, value in d.items():
+        if _is_array_of_tables(value):
+            for item in value:
+                lines += ["", f"[[{_toml_key(key)}]]", *_toml_table(item, _toml_key(key))]
+        elif isinstance(value, Mapping):
+            lines += ["", f"[{_toml_key(key)}]", *_toml_table(value, _toml_key(key))]
     return "\n".join(lines) + "\n"
 
 

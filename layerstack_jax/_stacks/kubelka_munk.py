@@ -68,6 +68,7 @@ from typing import ClassVar, Optional, Union
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from .._base.custom_types import RealLike, RealSpectrumLike
 from .._base.leaves import leaf
@@ -189,6 +190,11 @@ class Paint(eqx.Module):
             if not callable(x):
                 check_nonnegative(f"{self.name or 'paint'}: {what}", x)
 
+    def file_table(self) -> dict:
+        """Its entries in a stack file's ``[kubelka_munk]`` table (the inverse of the reader):
+        ``K_per_nm``, ``S_per_nm`` and the values as held."""
+        return {"K_per_nm": self.absorption, "S_per_nm": self.scattering}
+
     def constants(self, wavelength_nm):
         """``(K, S)`` on ``wavelength_nm`` (nm), each broadcastable to ``(*batch, wl)``, 1/nm."""
         label = self.name or "paint"
@@ -219,6 +225,16 @@ class Mixture(eqx.Module):
                 raise LayerstackError(f"Mixture: concentrations must have {len(self.pigments)} values (one per "
                                       f"pigment) on their last axis, got shape {shape}")
             check_nonnegative("Mixture: concentrations", self.concentrations)
+
+    def file_table(self) -> dict:
+        """Its entries in a stack file's ``[kubelka_munk]`` table: one ``[[kubelka_munk.pigments]]``
+        table per pigment (name, K, S, concentration); needs concrete concentrations of one mixture."""
+        c = np.asarray(self.concentrations, dtype=float)
+        if c.ndim != 1:
+            raise LayerstackError(f"Mixture: a stack file holds one mixture (concentrations of shape "
+                                  f"(pigment,)), got shape {c.shape}")
+        return {"pigments": [{"name": p.name or f"pigment {i + 1}", **p.file_table(), "concentration": float(ci)}
+                             for i, (p, ci) in enumerate(zip(self.pigments, c))]}
 
     def constants(self, wavelength_nm):
         """``(K, S)`` of the mixture on ``wavelength_nm`` (nm), 1/nm."""

@@ -489,3 +489,26 @@ def test_pigment_maps_from_the_command_line(tmp_path):
     np.testing.assert_allclose(maps["concentration_red"].values, red, rtol=1e-6)
     np.testing.assert_allclose(maps["thickness_nm"].values, thickness, rtol=1e-6)
     assert np.all(maps["status"].values == 0)
+
+
+def test_a_grey_varnish_and_a_darker_paint_are_named_as_one_combination():
+    """An opaque white with a black whose K/S is flat, under a grey varnish: the readings depend on
+    the varnish's α·h and the black's concentration only through one number per wavelength, the
+    same at every wavelength — the report says that the two are not identified separately and
+    which combination is."""
+    import fitting
+
+    white, black = ls.Paint(2e-6, 3e-3, name="white"), ls.Paint(5e-3, 1e-4, name="black")
+
+    def stack(h, c_black):
+        return ls.Stack(1.0, [ls.Layer(1.5, h, coherent=False, alpha=2e-5, name="varnish")],
+                        ls.KubelkaMunk(1.5, ls.Mixture(np.array([1.0, c_black]), [white, black]), None, 0.0))
+
+    g = ls.Directional(45.0, 0.0)
+    data = np.asarray(ls.reflectance(stack(2e4, 0.02), WL, g))
+    data = data + 0.002 * np.random.default_rng(0).standard_normal(data.shape)
+    objective = fitting.Objective(stack(1.5e4, 0.03), WL, fitting.Dataset(g, data, sigma=0.002),
+                                  [fitting.thickness("varnish"),
+                                   fitting.Parameter(("exit", "paint", "concentrations", 1), name="black")])
+    report = fitting.fit(objective).report()
+    assert "NOT IDENTIFIABLE" in report and "thickness[varnish]" in report and "black" in report

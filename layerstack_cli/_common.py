@@ -10,6 +10,8 @@ import numpy as np
 
 from layerstack_jax import Index, LayerstackError, Stack, Tabulated, parse_geometry
 
+from ._columns import prediction_columns
+
 PROG = "layerstack"
 
 
@@ -53,7 +55,7 @@ def _parse_geometries(texts: list[str]) -> list[tuple[str, object]]:
     for text in texts:
         text = text.strip()
         g = parse_geometry(text)  # raises LayerstackError with the accepted forms, or the bad angle
-        columns += g.prediction_columns(text)
+        columns += prediction_columns(g, text)
     names = [name for name, _ in columns]
     for name in names:
         if names.count(name) > 1:

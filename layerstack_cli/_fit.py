@@ -13,6 +13,7 @@ import numpy as np
 from layerstack_jax import DEFAULT_NODES, LayerstackError, LayerstackWarning
 from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
 
+from ._columns import prediction_columns
 from ._common import PROG, _positive_int, _precision, _resolve_geometry
 
 def _add_fit_parser(sub) -> None:
@@ -305,7 +306,7 @@ def _quantity_from_columns(text: str, names: list, source: str):
 
     from layerstack_jax import parse_geometry
 
-    options = parse_geometry(text).prediction_columns(text)  # [("R_0", Specular(0, "R")), ("T_0", ...), ...]
+    options = prediction_columns(parse_geometry(text), text)  # [("R_0", Specular(0, "R")), ("T_0", ...), ...]
     tokens = {col.split("_")[0].upper(): g for col, g in options}
 
     def stated(name: str):
@@ -401,7 +402,7 @@ def _cmd_fit(args) -> int:
     geometry, geometry_origin = _resolve_geometry(args.geometry, [n for n in columns if n != args.background],
                                                   source=args.data, origin="from the data's column names",
                                                   silent="the column names do not say")
-    if args.geometry is not None and len(geometry.prediction_columns(args.geometry.strip())) > 1:
+    if args.geometry is not None and len(prediction_columns(geometry, args.geometry.strip())) > 1:
         geometry, geometry_origin = _quantity_from_columns(args.geometry.strip(),
                                                            [n for n in columns if n != args.background], args.data)
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)

@@ -14,6 +14,7 @@ from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, parse_ge
 from layerstack_jax.io import (check_instrument_used, instrument_geometry, load_instrument, load_stack, parse_values,
                                parse_wavelengths, save_spectra_csv)
 
+from ._columns import polarized_columns, supports_polarization
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _positive_int_or_auto, _precision
 
 def _add_predict_parser(sub) -> None:
@@ -316,7 +317,7 @@ def _cmd_predict(args) -> int:
             check_stack(stack, wavelength)  # tables cover the grid? (checked once, before any geometry)
         except LayerstackError as e:
             raise LayerstackError(f"{args.stack}: {e}") from None
-        if args.polarization and not any(g.supports_polarization for _, g in requested):
+        if args.polarization and not any(supports_polarization(g) for _, g in requested):
             raise LayerstackError("--polarization needs at least one brdf:I:V geometry")
         columns, geometries = {}, {}
         if args.vary or args.vary_table:
@@ -335,9 +336,9 @@ def _cmd_predict(args) -> int:
                 values = reflectance(stack, wavelength, geometry, nodes=args.nodes)
             except LayerstackError as e:
                 raise LayerstackError(f"geometry {name!r}: {e}") from None
-            if args.polarization and geometry.supports_polarization:
+            if args.polarization and supports_polarization(geometry):
                 try:
-                    extra = geometry.polarized_columns(stack, wavelength, name, args.polarization, args.nodes)
+                    extra = polarized_columns(geometry, stack, wavelength, name, args.polarization, args.nodes)
                 except LayerstackError as e:
                     raise LayerstackError(f"--polarization: {e}") from None
                 columns.update(extra)

@@ -20,6 +20,7 @@ from scipy import integrate
 
 import fitting as ft
 import layerstack_jax as ls
+from layerstack_cli._columns import polarized_columns
 from layerstack_jax._instruments import geometry as G
 from layerstack_jax._stacks.stack import resolve
 from layerstack_jax._instruments.instrument import GAP_NM, cap_measure, cone_projected_solid_angle, cone_rule
@@ -418,4 +419,4 @@ def test_brdf_as_built_is_the_directional_reading_over_pi():
     assert g == ls.BRDF(45.0, 0.0, **kw) and ls.parse_geometry(g.label) == g
     assert ls.BRDF(45.0, 0.0).label == "brdf:45:0"
     with pytest.raises(ls.LayerstackError, match="ideal instrument"):
-        g.polarized_columns(VARNISH, WL, "brdf", "ss", NODES)
+        polarized_columns(g, VARNISH, WL, "brdf", "ss", NODES)

@@ -92,8 +92,7 @@ class Geometry(eqx.Module):
     * :attr:`quantity_label` — what its reading is ("reflectance", "BRDF (1/sr)" …);
     * :attr:`signed` — True when a reading may be negative (ellipsometric Δ, C, S);
     * optionally :meth:`background_factor` (for :func:`invert_background`),
-      :meth:`prediction_columns` (the columns ``layerstack predict`` writes for it) and
-      :meth:`residual` (model vs data in a fit: the difference, or a wrapped one for Δ).
+      and :meth:`residual` (model vs data in a fit: the difference, or a wrapped one for Δ).
 
     Geometries that do not go through :class:`~layerstack_jax.Optics` (an ellipsometer)
     override :meth:`measure` instead and return None from :meth:`optics`.
@@ -202,22 +201,11 @@ class Geometry(eqx.Module):
         (an ellipsometer's bandwidth). ``fitting.Objective`` checks the material tables against it."""
         return np.asarray(wavelength_nm, dtype=float)
 
-    def prediction_columns(self, text: str) -> list:
-        """``[(column name, geometry)]`` that ``layerstack predict -g text`` writes."""
-        return [(text, self)]
-
     def background_factor(self, rs: ResolvedStack, nodes: int):
         r"""``(A, r_b, measured → ρg-form)`` of :func:`invert_background`: the reading is
         :math:`A\rho_g/(1-\rho_g r_b)` after ``prepare(measured)``."""
         raise LayerstackError(f"cannot invert a {type(self).__name__} measurement for rho_g")
 
-    def polarized_columns(self, stack: Stack, wavelength_nm, name: str, polarization: str, nodes: int) -> dict:
-        """Polarization-resolved columns for ``layerstack predict --polarization``."""
-        raise LayerstackError(f"geometry {name!r}: --polarization applies to brdf:I:V geometries only")
-
-    @property
-    def supports_polarization(self) -> bool:
-        return False
 
 
 def _incidence(rs: ResolvedStack, angle_deg):
@@ -748,7 +736,8 @@ class BRDF(Geometry):
         return _covered(self, rs)
 
     @property
-    def _ideal(self) -> bool:
+    def ideal(self) -> bool:
+        """True without apertures and cover glass (the instrument of Simonot eq. 76 itself)."""
         return (_is_zero(self.illumination_half_angle_deg) and _is_zero(self.viewing_half_angle_deg)
                 and self.cover_index is None)
 
@@ -781,28 +770,6 @@ class BRDF(Geometry):
     def background_factor(self, rs, nodes):
         A, r, _ = self._factor().background_factor(rs, nodes)
         return A, r, lambda measured: measured * jnp.pi
-
-    @property
-    def supports_polarization(self) -> bool:
-        return True
-
-    def polarized_columns(self, stack, wavelength_nm, name, polarization, nodes):
-        """Diffuse part, 1/sr: ``f_AB`` (A illumination, B analyser, s or p) or the 16 Mueller
-        elements ``GEOM_mIJ`` (Ellis 1996)."""
-        import numpy as np
-
-        from .polarimetry import diffuse_mueller, polarized_brdf
-
-        if not self._ideal:
-            raise LayerstackError(f"geometry {name!r}: --polarization models the ideal instrument only "
-                                  "(no apertures, no cover glass)")
-        i, v = self.incidence_deg, self.viewing_deg
-        if polarization == "mueller":
-            M = np.asarray(diffuse_mueller(stack, wavelength_nm, i, v, nodes=nodes), dtype=float)
-            return {f"{name}_m{a}{b}": M[a, b] for a in range(4) for b in range(4)}
-        f = np.asarray(polarized_brdf(stack, wavelength_nm, i, v, nodes=nodes), dtype=float)
-        a, b = ("sp".index(c) for c in polarization)
-        return {f"{name}_{polarization}": f[a, b]}
 
 
 class Specular(Geometry):
@@ -846,13 +813,6 @@ class Specular(Geometry):
             return None
         parts = _split(text, "specular", 2, 3)
         return cls(float(parts[1]), parts[2].upper() if len(parts) > 2 else "R")
-
-    def prediction_columns(self, text):
-        """``specular:θ`` gives three columns ``R_θ, T_θ, A_θ``; ``specular:θ:Q`` gives ``Q_θ``."""
-        parts = text.split(":")
-        angle = parts[1].strip()
-        quantities = ("R", "T", "A") if len(parts) == 2 else (self.quantity,)
-        return [(f"{q}_{angle}", Specular(self.angle_deg, q)) for q in quantities]
 
 
 def geometry_kinds() -> tuple:

@@ -36,7 +36,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LayerstackError, LayerstackWarning, RealLike, Stack,
-                            TabulatedSpectrum, ellipsometry, file_fields, fixed_optics, optics_fixed_at, reflectance)
+                            TabulatedSpectrum, file_fields, fixed_optics, optics_fixed_at, reflectance, shared_readings)
 
 from ._parameters import Layout, Parameter, is_instrument_path, resolve_parameter
 
@@ -57,37 +57,6 @@ def _measure(stack: Stack, grid, g: Geometry, nodes: int, optics=None, colour=No
     converted to CIELAB by ``colour`` (a :class:`layerstack_jax.ColourSpace`) if given."""
     spectrum = reflectance(stack, grid, g, nodes=nodes, optics=optics)
     return spectrum if colour is None else colour.Lab(spectrum)
-
-
-def _shared_ellipsometer(g: Geometry, stack: Stack, colour) -> Optional[float]:
-    """The angle (degrees) of a reading that is one field of :func:`layerstack_jax.ellipsometry`
-    of ``stack`` (the geometry says so: :meth:`~layerstack_jax.Geometry.ellipsometry_angle`),
-    None for any other reading or a CIELAB one.
-
-    Several such datasets (ψ and Δ, several angles) read one stack: :meth:`Objective.predict`
-    computes them with one :func:`~layerstack_jax.ellipsometry` call over their angles instead
-    of one call per dataset (the same per-angle arithmetic; a compiled fit then holds one copy of
-    the model instead of one per dataset)."""
-    return None if colour is not None else g.ellipsometry_angle(stack)
-
-
-def _reading_groups(geometries: list, coated: list, ellipsometry_angle: dict, datasets) -> dict:
-    """The ellipsometer readings of several datasets that one :meth:`reading` over their angles
-    serves (:meth:`~layerstack_jax.Geometry.reading_group`: same instrument, one concrete angle
-    each; not already read through :func:`~layerstack_jax.ellipsometry`, not CIELAB), in groups
-    of two or more: ``{"member": {dataset: (key, angle)}, "angles": {key: (first dataset,
-    sorted angles)}}``. A thick substrate measured at seven angles in ψ and Δ is then one reading
-    of the stack, not fourteen (one copy of the model in a compiled fit)."""
-    found = {i: geometries[i].reading_group() for i in coated
-             if ellipsometry_angle[i] is None and datasets[i].colour is None}
-    found = {i: kg for i, kg in found.items() if kg is not None}
-    keys = [kg[0] for kg in found.values()]
-    member = {i: kg for i, kg in found.items() if keys.count(kg[0]) >= 2}
-    angles = {}
-    for i, (key, _) in member.items():
-        if key not in angles:
-            angles[key] = (i, sorted({a for k, a in member.values() if k == key}))
-    return {"member": member, "angles": angles}
 
 
 def _leaves_optics_fixed(stack: Stack, path: tuple) -> bool:
@@ -559,27 +528,18 @@ class Objective:
         # instrument parameters (fitting.instrument) are shared scalars: put into the geometries once
         geometries = self.layout.inject_geometries([ds.geometry for ds in self.datasets], coefficients)
 
-        # ideal single-angle ellipsometer readings: one ellipsometry() over their angles
-        angle = {i: _shared_ellipsometer(geometries[i], self.stack, self.datasets[i].colour) for i in coated}
-        angles = sorted({a for a in angle.values() if a is not None})
-        if sum(a is not None for a in angle.values()) < 2:
-            angles = []  # nothing to share: the dataset's own reading, as below
-        # other single-angle ellipsometer readings (thick substrates, transmission, non-ideal
-        # instruments): one reading() over the angles of each group of the same instrument
-        group = _reading_groups(geometries, coated, angle, self.datasets)
+        # readings of one ellipsometer at several angles: computed together (one copy of the model)
+        together = shared_readings([None if self.datasets[i].colour is not None or i not in coated else g
+                                    for i, g in enumerate(geometries)], self.stack)
 
         def one(own_s):
             cs = [o if ps else s for s, o, ps in zip(shared, own_s, per)]
             st = self.layout.inject(self.stack, cs, None)
-            e = ellipsometry(st, grid, np.asarray(angles)) if angles else None
-            readings = {key: geometries[first].at_angles(a).reading(st, grid) for key, (first, a) in group["angles"].items()}
+            read_together = together.read(st, grid)
 
             def read(i):
-                if angles and angle[i] is not None:
-                    return geometries[i].from_ellipsometry(e)[angles.index(angle[i])]
-                if i in group["member"]:
-                    key, a = group["member"][i]
-                    return geometries[i].from_reading(readings[key])[group["angles"][key][1].index(a)]
+                if i in read_together:
+                    return read_together[i]
                 return _measure(st, grid, geometries[i], nodes, optics[i], self.datasets[i].colour)
 
             return tuple(read(i) for i in coated)

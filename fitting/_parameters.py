@@ -805,7 +805,7 @@ class Layout:
         each, ``equinox.tree_at``); geometries no parameter names are returned as they are."""
         out = list(geometries)
         # one value per parameter, the same object in every geometry it enters: readings of one
-        # instrument at several angles then share one reading (Ellipsometric.reading_group)
+        # instrument at several angles then share one reading (layerstack_jax.shared_readings)
         value = {i: jnp.reshape(coefficients[i], ()) for i in set(self._instrument.values())}
         for (k, field), i in self._instrument.items():
             out[k] = eqx.tree_at(lambda g: getattr(g, field), out[k], value[i])

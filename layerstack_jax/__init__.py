@@ -44,6 +44,8 @@ from ._instruments.ellipsometry import Ellipsometry as Ellipsometry
 from ._instruments.ellipsometry import ellipsometry as ellipsometry
 from ._instruments.ellipsometry import psi_delta as psi_delta
 from ._instruments.ellipsometry import reflection_amplitudes as reflection_amplitudes
+from ._instruments.ellipsometry import SharedReadings as SharedReadings
+from ._instruments.ellipsometry import shared_readings as shared_readings
 from ._kernels.fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._kernels.fresnel import normal_wavevector as normal_wavevector
 from ._appearance.he_torrance import HeTorrance as HeTorrance
@@ -246,6 +248,8 @@ __all__ = [
     "save_spectra_csv",
     "save_stack",
     "Sellmeier",
+    "shared_readings",
+    "SharedReadings",
     "smith_lambda",
     "snell_invariant",
     "Specular",

@@ -135,8 +135,9 @@ def test_shared_ellipsometer_reading_only_where_it_is_ellipsometry():
         got = obj.predict(obj.layout.x0)
         for g, y, m in zip(gs, expect, got):
             np.testing.assert_allclose(np.asarray(m)[0], y, rtol=1e-12, atol=1e-12, err_msg=f"{g.label} {mode}")
-        shared = [g.ellipsometry_angle(stack) for g in gs]
-        assert (all(a is not None for a in shared)) == (stack is film and mode == "reflection")
+        together = ls.shared_readings(gs, stack)
+        assert bool(together.angles) == (stack is film and mode == "reflection")  # one ellipsometry() over both angles
+        assert together.indices == frozenset(range(4))  # else one reading() per instrument: shared all the same
 
 
 def test_compiled_fit_of_table_materials_holds_no_host_callback():
@@ -225,7 +226,7 @@ def test_single_fit_compiler_options(monkeypatch):
 def test_readings_of_one_instrument_at_several_angles_share_one_reading(monkeypatch):
     """Ellipsometer readings that are not ``ellipsometry()``'s — a thick substrate with its
     backside, an instrument with a bandwidth — are read with one ``reading()`` over the angles of
-    each instrument (``fitting._objective._reading_groups``), not one per dataset: the same
+    each instrument (``layerstack_jax.shared_readings``), not one per dataset: the same
     values as each dataset's own ``measure`` (to 1e-12), three readings instead of fifteen here.
     A dataset whose instrument differs (an angle offset) keeps its own reading."""
     wl = np.linspace(420.0, 780.0, 19)

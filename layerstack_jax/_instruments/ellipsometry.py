@@ -181,7 +181,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import ClassVar, NamedTuple, Optional, Union
+from typing import ClassVar, NamedTuple, Optional, Sequence, Union
 
 import equinox as eqx
 import jax
@@ -198,7 +198,8 @@ from .._stacks.stack import ResolvedStack, Stack, resolve
 from .geometry import Geometry
 from .polarimetry import front_correlations
 
-__all__ = ["Ellipsometry", "EllipsometerReading", "ellipsometry", "reflection_amplitudes", "psi_delta", "wrap_degrees"]
+__all__ = ["Ellipsometry", "EllipsometerReading", "SharedReadings", "ellipsometry", "reflection_amplitudes", "psi_delta",
+           "shared_readings", "wrap_degrees"]
 
 #: the quantities an :class:`Ellipsometric` geometry reads (one per dataset)
 QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im", "depolarization")
@@ -632,8 +633,8 @@ class Ellipsometric(Geometry):
 
     def ellipsometry_angle(self, stack: Stack) -> Optional[float]:
         """The angle (degrees) when this reading is :func:`ellipsometry`'s: the ideal instrument,
-        in reflection, on a coherent stack, at one concrete angle (:meth:`Geometry.ellipsometry_angle`);
-        else None (transmission, thick layers, non-idealities read through :meth:`reading`)."""
+        in reflection, on a coherent stack, at one concrete angle (:func:`shared_readings` then
+        reads several such geometries with one :func:`ellipsometry` over their angles); else None (transmission, thick layers, non-idealities read through :meth:`reading`)."""
         a = self.angle_deg
         if (self.mode != "reflection" or not is_coherent(stack) or not self.ideal or not is_concrete(a)
                 or np.ndim(a) != 0):
@@ -651,7 +652,8 @@ class Ellipsometric(Geometry):
         return {"psi": e.psi_deg, "delta": e.delta_deg, "N": e.N, "C": e.C, "S": e.S}[self.quantity]
 
     def reading_group(self) -> Optional[tuple]:
-        """``(key, angle)`` (:meth:`Geometry.reading_group`): the key holds every field but the
+        """``(key, angle)`` for :func:`shared_readings` (readings with equal keys differ only in angle
+        and quantity, so one :meth:`reading` over their angles serves them all): the key holds every field but the
         angle and the quantity — the static ones (mode, averaging nodes, non-uniform layer) by
         value, the non-idealities by value when concrete scalars (None counts as 0), else the
         leaf itself by identity (one fitted offset put into several datasets,
@@ -784,3 +786,64 @@ class Ellipsometric(Geometry):
         if mode not in MODES:
             raise LayerstackError(f"{text!r}: the ellipsometer's mode is 'reflection' or 'transmission', got {parts[3]!r}")
         return cls(float(parts[1]), q, mode=mode)
+
+
+class SharedReadings:
+    """Readings of several geometries of one stack that are computed together
+    (:func:`shared_readings`): ideal single-angle ellipsometer readings by one
+    :func:`ellipsometry` over their angles, other single-angle readings of one ellipsometer (a
+    thick substrate, transmission, non-idealities) by one :meth:`Ellipsometric.reading` over their
+    angles. The same per-angle arithmetic as each geometry's own ``measure``; a compiled fit then
+    holds one copy of the model per instrument instead of one per dataset."""
+
+    def __init__(self, geometries: tuple, angles: list, ellipsometry_angle: dict, members: dict, groups: dict):
+        self._geometries = geometries
+        #: the angles (degrees) read by one :func:`ellipsometry` (empty: none shared)
+        self.angles = angles
+        self._angle = ellipsometry_angle
+        self._members = members
+        self._groups = groups
+
+    @property
+    def indices(self) -> frozenset:
+        """The positions of the geometries read here (the others read themselves)."""
+        shared = {i for i, a in self._angle.items() if a is not None} if self.angles else set()
+        return frozenset(shared | set(self._members))
+
+    def read(self, stack: Stack, wavelength_nm) -> dict:
+        """``{position: reading (*angle, wl)}`` of the geometries in :attr:`indices`."""
+        out = {}
+        if self.angles:
+            e = ellipsometry(stack, wavelength_nm, np.asarray(self.angles))
+            for i, a in self._angle.items():
+                if a is not None:
+                    out[i] = self._geometries[i].from_ellipsometry(e)[self.angles.index(a)]
+        readings = {key: self._geometries[first].at_angles(a).reading(stack, wavelength_nm)
+                    for key, (first, a) in self._groups.items()}
+        for i, (key, a) in self._members.items():
+            out[i] = self._geometries[i].from_reading(readings[key])[self._groups[key][1].index(a)]
+        return out
+
+
+def shared_readings(geometries: Sequence[Optional[Geometry]], stack: Stack) -> SharedReadings:
+    """Which of ``geometries`` (None: a position to leave alone) read ``stack`` together
+    (:class:`SharedReadings`): two or more ideal single-angle ellipsometers in reflection on a
+    coherent stack share one :func:`ellipsometry` over their angles
+    (:meth:`Ellipsometric.ellipsometry_angle`); two or more readings of one ellipsometer that
+    differ only in angle and quantity share one :meth:`Ellipsometric.reading`
+    (:meth:`Ellipsometric.reading_group`). Decided from the concrete angles, once per model
+    structure (``fitting.Objective`` calls it once)."""
+    geometries = tuple(geometries)
+    angle = {i: g.ellipsometry_angle(stack) for i, g in enumerate(geometries) if isinstance(g, Ellipsometric)}
+    angles = sorted({a for a in angle.values() if a is not None})
+    if sum(a is not None for a in angle.values()) < 2:
+        angles = []  # nothing to share: each reads itself
+    found = {i: geometries[i].reading_group() for i, a in angle.items() if a is None}
+    found = {i: kg for i, kg in found.items() if kg is not None}
+    keys = [kg[0] for kg in found.values()]
+    members = {i: kg for i, kg in found.items() if keys.count(kg[0]) >= 2}
+    groups = {}
+    for i, (key, _) in members.items():
+        if key not in groups:
+            groups[key] = (i, sorted({a for k, a in members.values() if k == key}))
+    return SharedReadings(geometries, angles, angle, members, groups)

@@ -172,29 +172,6 @@ class Geometry(eqx.Module):
         wrapped into (−180°, 180°]); an override must stay differentiable in ``model``."""
         return model - data
 
-    def ellipsometry_angle(self, stack: Stack) -> Optional[float]:
-        """For a reading that is one field of :func:`~layerstack_jax.ellipsometry` of ``stack`` at
-        one concrete angle (an ideal ellipsometer in reflection on a coherent stack): that angle
-        in degrees, so that a fit reads several such datasets of one stack with one
-        ``ellipsometry()`` over their angles and picks each one's values with
-        :meth:`from_ellipsometry`. None (here, and for every geometry but the ellipsometer)
-        otherwise: the reading is then its own :meth:`measure`."""
-        return None
-
-    def from_ellipsometry(self, e):
-        """This reading from an :class:`~layerstack_jax.Ellipsometry` at its
-        :meth:`ellipsometry_angle` (only called when that is not None)."""
-        raise NotImplementedError(type(self).__name__)
-
-    def reading_group(self) -> Optional[tuple]:
-        """``(key, angle)`` for an ellipsometer's reading at one concrete angle (degrees) that is
-        not :func:`~layerstack_jax.ellipsometry`'s (a thick substrate, transmission, an instrument
-        with non-idealities): readings with equal keys differ only in angle and quantity, so a fit
-        reads them with one :meth:`reading` over their angles (:meth:`at_angles`) and picks each
-        one's values with :meth:`from_reading`. None (here, and for every geometry but the
-        ellipsometer): the reading is its own :meth:`measure`."""
-        return None
-
     def wavelengths_read(self, wavelength_nm) -> np.ndarray:
         """The wavelengths (nm) at which the materials are evaluated for a reading on
         ``wavelength_nm``: the grid itself, or wider where the instrument averages over a band

@@ -58,6 +58,7 @@ from ._stacks.illumination import specular as specular
 from ._instruments.geometry import BRDF as BRDF
 from ._instruments.geometry import Directional as Directional
 from ._instruments.geometry import Geometry as Geometry
+from ._instruments.geometry import OpticalGeometry as OpticalGeometry
 from ._instruments.geometry import Specular as Specular
 from ._instruments.geometry import Sphere as Sphere
 from ._instruments.geometry import fixed_optics as fixed_optics
@@ -220,6 +221,7 @@ __all__ = [
     "normal_wavevector",
     "OBSERVERS",
     "open_cube",
+    "OpticalGeometry",
     "Optics",
     "optics_fixed_at",
     "Paint",

@@ -16,6 +16,8 @@
 from __future__ import annotations
 
 import ast
+import inspect
+import textwrap
 import io
 import re
 import tokenize
@@ -313,3 +315,52 @@ def test_the_history_check_can_fail():
     source = ('"""Module (measured 2026-11-27)."""\n# forward 100 → 91 ms\nx = 1  # 30 -> 9 ms\n'
               'def f():\n    """Release ``v2026-05-24``; 10 nm → 12 nm is a unit, not a timing."""\n')
     assert [b.split(":")[1] for b in _history_in(source, "probe")] == ["2", "3", "1"], _history_in(source, "probe")
+
+
+def _own_members(cls) -> set[str]:
+    return {k for k in vars(cls) if not k.startswith("__") and not k.startswith("_abc")}
+
+
+def _concrete_subclasses(cls) -> list:
+    out, todo = [], [cls]
+    while todo:
+        c = todo.pop()
+        todo += c.__subclasses__()
+        if not getattr(c, "__abstractmethods__", None):
+            out.append(c)
+    return out
+
+
+def test_geometry_is_narrow_and_every_instrument_honours_it():
+    """``Geometry`` holds what every instrument needs to be read (≤ 10 members); what only the
+    spectrophotometers have lives in ``OpticalGeometry``; clients' extras (command-line columns,
+    ellipsometer batching) live with their clients. Every concrete geometry implements every
+    abstract member, and none of its members is a stub that raises NotImplementedError."""
+    import layerstack_jax as ls
+
+    members = _own_members(ls.Geometry)
+    assert len(members) <= 10, sorted(members)
+    assert not members & {"optics", "read", "prediction_columns", "polarized_columns", "supports_polarization",
+                          "ellipsometry_angle", "from_ellipsometry", "reading_group", "background_factor"}
+    concrete = _concrete_subclasses(ls.Geometry)
+    assert {c.__name__ for c in concrete} >= {"Sphere", "Directional", "BRDF", "Specular", "Ellipsometric"}
+    interface = set().union(*(getattr(c, "__abstractmethods__", set()) for c in (ls.Geometry, ls.OpticalGeometry)))
+    assert interface >= {"measure", "label", "quantity_label", "parse", "optics", "read"}
+    bad = []
+    for cls in concrete:
+        for base in (ls.Geometry, ls.OpticalGeometry):
+            if issubclass(cls, base):
+                for name in base.__abstractmethods__:
+                    if getattr(getattr(cls, name), "__isabstractmethod__", False):
+                        bad.append(f"{cls.__name__}.{name} is not implemented")
+        for name in _own_members(cls) | members:
+            member = getattr(cls, name, None)
+            fn = getattr(member, "fget", member)
+            try:
+                source = ast.parse(textwrap.dedent(inspect.getsource(fn)))
+            except (TypeError, OSError):
+                continue
+            for node in ast.walk(source):
+                if isinstance(node, ast.Raise) and "NotImplementedError" in ast.unparse(node):
+                    bad.append(f"{cls.__name__}.{name} raises NotImplementedError")
+    assert not bad, "\n".join(bad)

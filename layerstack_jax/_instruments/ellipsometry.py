@@ -612,7 +612,6 @@ class Ellipsometric(Geometry):
 
     spelling: ClassVar[str] = "ellipsometry:ANGLE:psi|delta|N|C|S|rho_re|rho_im|depolarization[:transmission]"
     signed: ClassVar[bool] = True  # Δ, C, S, Re ρ, Im ρ may be negative
-    reads_diffuse_light: ClassVar[bool] = False
     reading_is_fraction: ClassVar[bool] = False
 
     def _is_zero(self, name: str) -> bool:
@@ -745,12 +744,6 @@ class Ellipsometric(Geometry):
         return self.quantity in ("delta", "S", "rho_im")
 
     # the Geometry interface: an ellipsometer needs no Optics (it overrides measure)
-    def optics(self, rs, background, nodes):
-        return None
-
-    def read(self, rs, optics, background):
-        raise LayerstackError("Ellipsometric reads through measure(), not through Optics")
-
     @property
     def label(self) -> str:
         a = self.angle_deg

@@ -62,6 +62,7 @@ from .optics import Optics, check_optics, coherent_films
 
 __all__ = [
     "Geometry",
+    "OpticalGeometry",
     "Sphere",
     "Directional",
     "BRDF",
@@ -81,27 +82,24 @@ def _scalar_text(x) -> str:
 
 
 class Geometry(eqx.Module):
-    """Interface of a measurement geometry (abstract).
+    """Interface of a measurement geometry (abstract): what every instrument needs to be read.
 
-    A concrete geometry implements:
-
-    * :meth:`optics` — the :class:`~layerstack_jax.Optics` it needs for a resolved stack (the
-      Fresnel algebra at its angles; hemispherical nodes over a background);
-    * :meth:`read` — the measured quantity from those optics, ``(*angle, wl)``;
-    * :attr:`label` and :meth:`parse` — its command-line spelling, both ways;
+    * :meth:`measure` — what it reads for a stack on a wavelength grid, ``(*angle, wl)``;
+    * :attr:`label` and :meth:`parse` — its command-line spelling, both ways (:attr:`spelling`
+      the accepted forms, for messages);
     * :attr:`quantity_label` — what its reading is ("reflectance", "BRDF (1/sr)" …);
-    * :attr:`signed` — True when a reading may be negative (ellipsometric Δ, C, S);
-    * optionally :meth:`background_factor` (for :func:`invert_background`),
-      and :meth:`residual` (model vs data in a fit: the difference, or a wrapped one for Δ).
+    * :attr:`signed`, :attr:`reading_is_fraction` — what values a reading may take (data checks);
+    * :meth:`residual` — model vs data in a fit (the difference, or a wrapped one for Δ);
+    * :meth:`wavelengths_read` — where the materials are evaluated (wider than the grid when the
+      instrument averages over a band).
 
-    Geometries that do not go through :class:`~layerstack_jax.Optics` (an ellipsometer)
-    override :meth:`measure` instead and return None from :meth:`optics`.
+    Instruments that read intensities through the fixed :class:`~layerstack_jax.Optics` (the
+    spectrophotometers) implement :class:`OpticalGeometry`; an ellipsometer, which reads the
+    amplitudes' ratio, implements this interface directly.
     """
 
     #: readings may be negative (ellipsometric Δ, C, S)
     signed: ClassVar[bool] = False
-    #: over a background, the reading includes the diffuse light (hemispherical nodes needed)
-    reads_diffuse_light: ClassVar[bool] = True
     #: the reading is a dimensionless fraction, normally in [0, 1] (a value > 1 suggests percent)
     reading_is_fraction: ClassVar[bool] = True
 
@@ -110,39 +108,11 @@ class Geometry(eqx.Module):
         if "parse" in cls.__dict__ and cls not in _KINDS:  # a concrete kind parses its own spelling
             _KINDS.append(cls)
 
-    # -- what it needs and how it reads it
     @abc.abstractmethod
-    def optics(self, rs: ResolvedStack, background: bool, nodes: int) -> Optional[Optics]:
-        """The :class:`~layerstack_jax.Optics` this geometry needs for ``rs``."""
-
-    @abc.abstractmethod
-    def read(self, rs: ResolvedStack, optics: Optics, background: bool) -> Float[Array, "*angle wl"]:
-        """The instrument's reading from ``optics`` (made by :meth:`optics` for ``rs``)."""
-
     def measure(self, stack: Stack, wavelength_nm, *, nodes: int = DEFAULT_NODES,
                 optics: Optional[Optics] = None) -> Float[Array, "*angle wl"]:
-        """What this instrument reads for ``stack`` on ``wavelength_nm`` (nm), reusing
-        ``optics`` (from :func:`fixed_optics`) when given. Shaped ``(*angle, wl)``."""
-        rs = self._seen(resolve(stack, wavelength_nm))
-        background = rs.rho_g is not None
-        if optics is None:
-            optics = self.optics(rs, background, nodes)
-        else:
-            check_optics(optics, rs, self, nodes)
-            if background and self.reads_diffuse_light and optics.diffuse is None:
-                raise LayerstackError("optics were made for a stack over a substrate, this one has a background")
-        try:
-            out = self.read(rs, optics, background)
-        except TypeError as e:  # leaves whose leading (batch) axes do not broadcast together
-            raise LayerstackError(f"the stack's leaves do not broadcast together ({e}); to predict many spectra "
-                                  "from leaves with batch axes use layerstack_jax.predict(stack, wavelength_nm, "
-                                  "geometry), which maps over them in bounded memory") from None
-        return jnp.broadcast_to(out, out.shape[:-1] + rs.wavelength.shape[-1:])
-
-    def _seen(self, rs: ResolvedStack) -> ResolvedStack:
-        """The resolved stack as the instrument sees it: ``rs`` itself, or ``rs`` behind what the
-        instrument adds in front of the sample (a cover glass: :func:`~layerstack_jax._instruments.instrument.covered`)."""
-        return rs
+        """What this instrument reads for ``stack`` on ``wavelength_nm`` (nm), shaped ``(*angle,
+        wl)``; ``optics`` (from :func:`fixed_optics`) is reused by geometries that have them."""
 
     # -- how it prints and parses itself
     @property
@@ -178,11 +148,57 @@ class Geometry(eqx.Module):
         (an ellipsometer's bandwidth). ``fitting.Objective`` checks the material tables against it."""
         return np.asarray(wavelength_nm, dtype=float)
 
-    def background_factor(self, rs: ResolvedStack, nodes: int):
-        r"""``(A, r_b, measured → ρg-form)`` of :func:`invert_background`: the reading is
-        :math:`A\rho_g/(1-\rho_g r_b)` after ``prepare(measured)``."""
-        raise LayerstackError(f"cannot invert a {type(self).__name__} measurement for rho_g")
+class OpticalGeometry(Geometry):
+    """A geometry read through the fixed :class:`~layerstack_jax.Optics` (abstract): the
+    spectrophotometers — sphere, 45°/0°, BRDF, specular.
 
+    * :meth:`optics` — the Optics it needs for a resolved stack (the Fresnel algebra at its
+      angles; hemispherical nodes over a background), reused by :func:`fixed_optics`;
+    * :meth:`read` — the measured quantity from those optics, ``(*angle, wl)``;
+    * ``background_factor(rs, nodes)`` where the reading can be inverted for ρg — ``(A, r_b,
+      prepare)``: the reading is :math:`A\rho_g/(1-\rho_g r_b)` after ``prepare(measured)``
+      (:func:`invert_background`; the sphere, 45°/0° and BRDF have one, specular readings not);
+    * :attr:`reads_diffuse_light` — over a background the reading includes diffuse light;
+    * :meth:`_seen` — the stack as the instrument sees it (behind a cover glass).
+
+    :meth:`measure` is the same for all of them: resolve, make (or check) the optics, read.
+    """
+
+    #: over a background, the reading includes the diffuse light (hemispherical nodes needed)
+    reads_diffuse_light: ClassVar[bool] = True
+
+    @abc.abstractmethod
+    def optics(self, rs: ResolvedStack, background: bool, nodes: int) -> Optics:
+        """The :class:`~layerstack_jax.Optics` this geometry needs for ``rs``."""
+
+    @abc.abstractmethod
+    def read(self, rs: ResolvedStack, optics: Optics, background: bool) -> Float[Array, "*angle wl"]:
+        """The instrument's reading from ``optics`` (made by :meth:`optics` for ``rs``)."""
+
+    def _seen(self, rs: ResolvedStack) -> ResolvedStack:
+        """The resolved stack as the instrument sees it: ``rs`` itself, or ``rs`` behind what the
+        instrument adds in front of the sample (a cover glass: :func:`~layerstack_jax._instruments.instrument.covered`)."""
+        return rs
+
+    def measure(self, stack: Stack, wavelength_nm, *, nodes: int = DEFAULT_NODES,
+                optics: Optional[Optics] = None) -> Float[Array, "*angle wl"]:
+        """What this instrument reads for ``stack`` on ``wavelength_nm`` (nm), reusing
+        ``optics`` (from :func:`fixed_optics`) when given. Shaped ``(*angle, wl)``."""
+        rs = self._seen(resolve(stack, wavelength_nm))
+        background = rs.rho_g is not None
+        if optics is None:
+            optics = self.optics(rs, background, nodes)
+        else:
+            check_optics(optics, rs, self, nodes)
+            if background and self.reads_diffuse_light and optics.diffuse is None:
+                raise LayerstackError("optics were made for a stack over a substrate, this one has a background")
+        try:
+            out = self.read(rs, optics, background)
+        except TypeError as e:  # leaves whose leading (batch) axes do not broadcast together
+            raise LayerstackError(f"the stack's leaves do not broadcast together ({e}); to predict many spectra "
+                                  "from leaves with batch axes use layerstack_jax.predict(stack, wavelength_nm, "
+                                  "geometry), which maps over them in bounded memory") from None
+        return jnp.broadcast_to(out, out.shape[:-1] + rs.wavelength.shape[-1:])
 
 
 def _incidence(rs: ResolvedStack, angle_deg):
@@ -340,7 +356,7 @@ _COVER_FLAGS = {"contact": "cover_contact"}
 _COVER_DEFAULTS = {"cover_thickness_nm": 1.0e6, "cover_alpha_per_nm": 0.0}
 
 
-class Sphere(Geometry):
+class Sphere(OpticalGeometry):
     r"""Integrating sphere, collimated illumination at ``incidence_deg``; specular component
     ``'excluded'`` (SCE, Simonot eq. 78) or ``'included'`` (SCI: adds the front reflectance).
 
@@ -552,7 +568,7 @@ def _check_apertures(name: str, g) -> None:
             check_cone(f"{name}.{half} (degrees)", getattr(g, axis), getattr(g, half))
 
 
-class Directional(Geometry):
+class Directional(OpticalGeometry):
     r"""Radiance detector: reflectance factor against a perfect white diffuser (Simonot eq. 79),
     illumination at ``incidence_deg``, viewing at ``viewing_deg`` (45/0, 0/45, …).
 
@@ -670,7 +686,7 @@ class Directional(Geometry):
         return A, d.r, lambda measured: measured
 
 
-class BRDF(Geometry):
+class BRDF(OpticalGeometry):
     """Bidirectional reflectance distribution function in 1/sr (Simonot eq. 76): the
     :class:`Directional` reflectance factor divided by π (diffuse part only).
 
@@ -749,7 +765,7 @@ class BRDF(Geometry):
         return A, r, lambda measured: measured * jnp.pi
 
 
-class Specular(Geometry):
+class Specular(OpticalGeometry):
     """Specular measurement at ``angle_deg``: ``quantity`` 'R' (reflectance), 'T' (transmittance
     into the exit medium) or 'A' (absorptance, 1 − R − T), for natural light.
 
@@ -837,6 +853,8 @@ def fixed_optics(stack: Stack, wavelength_nm, geometry: Geometry, *, nodes: int 
     Returns None for a geometry that reads without optics (an ellipsometer).
     """
     _check_geometry(geometry)
+    if not isinstance(geometry, OpticalGeometry):
+        return None
     rs = geometry._seen(resolve(stack, wavelength_nm))
     return geometry.optics(rs, rs.rho_g is not None, nodes)
 
@@ -902,6 +920,9 @@ def invert_background(stack: Stack, wavelength_nm, measured, geometry: Geometry,
     if not stack.exit.diffuse:
         raise LayerstackError("invert_background needs a stack over a LambertianBackground")
     _check_geometry(geometry)
+    if not callable(getattr(geometry, "background_factor", None)):
+        raise LayerstackError(f"cannot invert a {type(geometry).__name__} measurement for rho_g (a reading of the "
+                              "diffuse light is needed: sphere, 45/0 or BRDF)")
     measured = jnp.asarray(measured)
     unit = Stack(stack.ambient, stack.layers, LambertianBackground(stack.exit.index, 1.0))  # ρg = 1, same binder
     rs = geometry._seen(resolve(unit, wavelength_nm))

@@ -45,7 +45,6 @@ from typing import Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
@@ -55,13 +54,13 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from layerstack_jax import LayerstackError, progress_reporter, traced_checks_off
 
 from ._bounded import compiled_lbfgsb
+from ._least_squares import LevenbergMarquardt, RoundoffTrustRegion, optx_solver, solver_status
 from ._objective import Objective
 from ._results import build_result
 from ._statistics import bound_contacts
-from ._structured import (STRUCTURE_MODES, CompressedJacobian, Structure, StructuredDampedNewtonDescent,
-                          block_distance, compressed_jacobian_function, find_structure, sparse_jacobian_function,
-                          residuals_with_jacobian, structured_jacobian_with_statistics, structured_statistics_function,
-                          verify_structure, with_args_tangent)
+from ._structured import (STRUCTURE_MODES, CompressedJacobian, Structure, compressed_jacobian_function, find_structure,
+                          residuals_with_jacobian, sparse_jacobian_function, structured_jacobian_with_statistics,
+                          structured_statistics_function, verify_structure, with_args_tangent)
 from ._watchdog import wait_for
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE, STATUS, result_message
 
@@ -131,157 +130,6 @@ class FitOutput(NamedTuple):
     jacobian: Float[Array, "*fit M P"] | CompressedJacobian
 
 
-# --------------------------------------------------------------------------- Levenberg–Marquardt
-class RoundoffTrustRegion(optx.AbstractSearch):
-    """:class:`optimistix.ClassicalTrustRegion` (``region``) that also accepts a step when both
-    its predicted and its actual change of the cost are at the round-off level of the cost
-    (≤ 1000 ε |f|).
-
-    There the ratio actual/predicted is noise: the classical rule rejects such steps at random
-    and shrinks the region again and again, so a fit that has already converged spends many
-    extra steps (each a full Jacobian) before its step-size test is met — 23 steps instead of 9
-    on benchmark F1. Accepting them leaves the damping unchanged and lets the Cauchy test end the
-    solve as soon as the steps are small."""
-
-    region: optx.ClassicalTrustRegion = optx.ClassicalTrustRegion()
-
-    def init(self, y, f_info_struct):
-        return self.region.init(y, f_info_struct)
-
-    def step(self, first_step, y, y_eval, f_info, f_eval_info, state):
-        step_size, accept, result, new_state = self.region.step(first_step, y, y_eval, f_info, f_eval_info, state)
-        f = f_info.as_min()
-        noise = 1e3 * jnp.finfo(jnp.result_type(f)).eps * jnp.abs(f)
-        y_diff = jax.tree.map(lambda a, b: a - b, y_eval, y)
-        predicted = self.region.predict_reduction(y_diff, f_info)
-        flat = (jnp.abs(predicted) <= noise) & (jnp.abs(f_eval_info.as_min() - f) <= noise)
-        keep = flat & ~accept
-        step_size = jnp.where(keep, state.step_size, step_size)
-        new_state = jax.tree.map(lambda a, b: jnp.where(keep, a, b), state, new_state)
-        return step_size, accept | flat, result, new_state
-
-
-def _quiet(**kwargs) -> None:
-    """No progress output from inside the compiled solve."""
-
-
-def gauss_newton_distance(residual: Float[Array, " M"], jacobian: Float[Array, "M P"], dof: int):
-    r"""``(d², s²)``: the squared length of the Gauss–Newton step still to go, in standard errors
-    of the unscaled covariance, :math:`d^2 = g^\top (J^\top J)^{+} g` with :math:`g = J^\top r`
-    — twice the cost decrease that step predicts, MINUIT's *estimated distance to the minimum*
-    (James & Roos 1975) — and the residuals' variance :math:`s^2 = \|r\|^2/\mathrm{dof}`.
-
-    Directions the data do not determine (eigenvalues of :math:`J^\top J` below 1e-12 of the
-    largest, and the zero columns of components held on a bound) are left out. Invariant under
-    a reparametrisation of the coordinates, so the solvers' coordinates ``u`` serve."""
-    g = jacobian.T @ residual
-    w, V = jnp.linalg.eigh(jacobian.T @ jacobian)
-    kept = w > 1e-12 * jnp.max(w)
-    d2 = jnp.sum(jnp.where(kept, (V.T @ g) ** 2 / jnp.where(kept, w, 1.0), 0.0))
-    return d2, jnp.sum(residual * residual) / max(dof, 1)
-
-
-def near_minimum(state, sigma_tol: float, dof: int, structure=None):
-    r"""True once the last accepted point of a Gauss–Newton-family solve (optimistix state) is
-    within ``sigma_tol`` standard errors of the minimum: :math:`d^2 \le`
-    ``sigma_tol``\ :sup:`2` :math:`\min(1, s^2)` (:func:`gauss_newton_distance`).
-
-    With σ given, :math:`s^2 \approx 1` and the distance is in the reported standard errors;
-    without σ (unit weights) the factor :math:`s^2` converts it to the scaled ones, and with a
-    σ that is too large (:math:`s^2 < 1`) it is as strict as the smaller errors. Residuals at the
-    round-off level (noise-free data) leave :math:`s^2 \approx 0`: the rule never fires and
-    optimistix's step and cost test ends the solve, as before. Later steps of a statistically
-    converged fit move it by less than ``sigma_tol`` σ — each one a full Jacobian of the model."""
-    r = jnp.concatenate([jnp.ravel(a) for a in jax.tree.leaves(state.f_info.residual)])
-    if structure is not None:  # the block-structured descent's Jacobian: d² by its block QR
-        d2, s2 = block_distance(state.descent_state, structure), jnp.sum(r * r) / max(dof, 1)
-    else:
-        d2, s2 = gauss_newton_distance(r, state.f_info.jac.as_matrix(), dof)
-    return (state.num_accepted_steps >= 1) & (d2 <= sigma_tol ** 2 * jnp.minimum(1.0, s2))
-
-
-class _GaussNewtonFamily(optx.AbstractGaussNewton):
-    """The Gauss–Newton-family solvers of :func:`fit`: optimistix's composition (a descent
-    within a search, :class:`optimistix.AbstractGaussNewton`) whose solves also stop near the
-    minimum (:func:`near_minimum`, ``sigma_tol`` standard errors; 0: never) — ``dof`` the
-    fit's degrees of freedom."""
-
-    rtol: float
-    atol: float
-    sigma_tol: float = 0.0
-    dof: int = 1
-    norm: Callable = optx.max_norm
-    verbose: Callable = _quiet
-
-    def terminate(self, fn, y, args, options, state, tags):
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        if not self.sigma_tol:
-            return done, result
-        structure = getattr(self.descent, "structure", None)
-        near = jnp.invert(done) & near_minimum(state, self.sigma_tol, self.dof, structure)
-        return done | near, optx.RESULTS.where(near, optx.RESULTS.successful, result)
-
-
-class GaussNewton(_GaussNewtonFamily):
-    """:class:`optimistix.GaussNewton`'s parts (undamped Newton steps, unit learning rate)."""
-
-    descent: optx.AbstractDescent = optx.NewtonDescent()
-    search: optx.AbstractSearch = optx.LearningRate(1.0)
-
-
-class Dogleg(_GaussNewtonFamily):
-    """:class:`optimistix.Dogleg`'s parts (dogleg steps in a classical trust region)."""
-
-    descent: optx.AbstractDescent = optx.DoglegDescent()
-    search: optx.AbstractSearch = optx.ClassicalTrustRegion()
-
-
-class LevenbergMarquardt(_GaussNewtonFamily):
-    """Levenberg–Marquardt composed from optimistix parts, as optimistix documents for custom
-    solvers: Gauss–Newton steps damped by :class:`optimistix.DampedNewtonDescent` (QR of the
-    damped system) within the :class:`RoundoffTrustRegion` update."""
-
-    descent: optx.AbstractDescent = optx.DampedNewtonDescent(linear_solver=lx.QR())
-    search: optx.AbstractSearch = RoundoffTrustRegion()
-
-    def terminate(self, fn, y, args, options, state, tags):
-        r"""The family's test, and the multi-start give-up rule: with ``options["give_up"] =
-        (steps, cost)``, a solve that has taken ``steps`` steps while its cost
-        :math:`\tfrac12\|r\|^2` is still above ``cost`` ends, marked
-        ``RESULTS.nonlinear_divergence`` (:data:`fitting._status.ABANDONED`; a result the
-        Gauss–Newton family never gives otherwise). A single fit passes :data:`NEVER`."""
-        done, result = super().terminate(fn, y, args, options, state, tags)
-        give_up = (options or {}).get("give_up")
-        if give_up is None:
-            return done, result
-        steps, cost = give_up
-        f = 0.5 * sum(jnp.sum(jnp.square(r)) for r in jax.tree.leaves(state.f_info.residual))
-        hopeless = jnp.invert(done) & (state.num_steps >= steps) & (f > cost)
-        return done | hopeless, optx.RESULTS.where(hopeless, optx.RESULTS.nonlinear_divergence, result)
-
-
-def _optx_solver(o: SolverOptions, dof: int, structure=None):
-    """The optimistix solver of ``o`` for a fit with ``dof`` degrees of freedom;
-    Levenberg–Marquardt with the block-QR descent when the Jacobian has a ``structure``
-    (:class:`fitting._structured.StructuredDampedNewtonDescent`)."""
-    least_squares = {"lm": LevenbergMarquardt, "gauss-newton": GaussNewton, "dogleg": Dogleg}
-    if o.method == "lm" and structure is not None:
-        return LevenbergMarquardt(rtol=o.rtol, atol=o.atol, sigma_tol=o.sigma_tol, dof=dof,
-                                  descent=StructuredDampedNewtonDescent(structure))
-    if o.method in least_squares:
-        return least_squares[o.method](rtol=o.rtol, atol=o.atol, sigma_tol=o.sigma_tol, dof=dof)
-    return optx.BFGS(rtol=o.rtol, atol=o.atol)
-
-
-def _status(result, x):
-    """The library's status (traced int) of an optimistix ``result`` at solution ``x``."""
-    code = jnp.where(result == optx.RESULTS.successful, CONVERGED,
-                     jnp.where(result == optx.RESULTS.nonlinear_max_steps_reached, MAX_STEPS,
-                               jnp.where(result == optx.RESULTS.nonfinite, NONFINITE,
-                                         jnp.where(result == optx.RESULTS.nonlinear_divergence, ABANDONED, FAILED))))
-    return jnp.where(jnp.all(jnp.isfinite(x)), code, NONFINITE)
-
-
 # --------------------------------------------------------------------------- compiled solves
 def _solve_function(objective: Objective, o: SolverOptions):
     """Pure ``(start, args, optics, give_up) -> (x, steps, status)``; ``start`` is ``u``
@@ -309,7 +157,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
         return solve
 
     structure = structure_for(objective, o.structure, o.method)
-    solver = _optx_solver(o, objective.n_points - objective.n_parameters, structure)
+    solver = optx_solver(o, objective.n_points - objective.n_parameters, structure)
 
     if o.method == "bfgs":  # BFGS needs only the gradient: plain reverse mode
         def residuals(u, args_optics):
@@ -319,7 +167,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
             sol = optx.minimise(lambda u, a: 0.5 * jnp.sum(residuals(u, a) ** 2), solver, u0, args=(args, optics),
                                 max_steps=o.max_steps, throw=False)
             x = hold_on_bounds(layout, layout.to_physical(sol.value))
-            return x, sol.stats["num_steps"], _status(sol.result, x)
+            return x, sol.stats["num_steps"], solver_status(sol.result, x)
 
         return solve
 
@@ -339,7 +187,7 @@ def _solve_function(objective: Objective, o: SolverOptions):
         x = hold_on_bounds(layout, layout.to_physical(sol.value))
         # the aux of the solution: the final state's (Solution.aux lags one accepted step behind)
         (model, res, pen), J = sol.state.aux
-        return x, sol.stats["num_steps"], _status(sol.result, x), (model, res, pen, J)
+        return x, sol.stats["num_steps"], solver_status(sol.result, x), (model, res, pen, J)
 
     return solve
 

@@ -15,7 +15,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from fitting._solve import gauss_newton_distance
+from fitting._least_squares import gauss_newton_distance
 
 WL = np.linspace(400.0, 700.0, 61)
 R0 = ls.Specular(0.0, "R")

@@ -76,6 +76,8 @@ from ._parameters import bspline_basis as bspline_basis
 from ._parameters import dispersion as dispersion
 from ._parameters import index_n as index_n
 from ._parameters import instrument as instrument
+from ._parameters import FitFile as FitFile
+from ._parameters import load_fit_file as load_fit_file
 from ._parameters import load_fit_parameters as load_fit_parameters
 from ._parameters import parameters_from_declarations as parameters_from_declarations
 from ._parameters import rho_g as rho_g
@@ -136,6 +138,8 @@ __all__ = [
     "load_design",
     "plot_design",
     "run_design",
+    "load_fit_file",
+    "FitFile",
     "load_fit_parameters",
     "parameters_from_declarations",
 ]

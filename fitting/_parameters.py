@@ -45,7 +45,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Optional, Sequence, Union
+from pathlib import Path
+from typing import NamedTuple, Optional, Sequence, Union
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -53,11 +54,13 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax import Cauchy, Index, LayerstackError, RealLike, Sellmeier, Stack, as_spectrum, leaf_role_at
-from layerstack_jax.io import FreeDeclaration, load_fit_stack
+from layerstack_jax.io import FreeDeclaration, InstrumentSettings, instrument_settings, read_toml, stack_from_dict
 
 __all__ = [
     "parameters_from_declarations",
     "load_fit_parameters",
+    "load_fit_file",
+    "FitFile",
     "Parameter",
     "thickness",
     "alpha",
@@ -303,11 +306,31 @@ def parameters_from_declarations(declarations: Sequence[FreeDeclaration], source
     return params
 
 
+class FitFile(NamedTuple):
+    """A stack file read for a fit (:func:`load_fit_file`): the stack, its free parameters and
+    its ``[instrument]`` settings."""
+
+    stack: Stack
+    parameters: list
+    instrument: InstrumentSettings
+
+
+def load_fit_file(path) -> FitFile:
+    """A stack file with free-parameter annotations, read once: the stack, ``[Parameter]`` of its
+    annotations (schema: :mod:`layerstack_jax.io`, "Free parameters") and its ``[instrument]``
+    settings (:func:`layerstack_jax.io.instrument_settings`)."""
+    path = Path(path)
+    raw = read_toml(path)
+    declarations: list = []
+    stack = stack_from_dict(raw, path.parent, source=str(path), free=declarations)
+    settings = instrument_settings(raw, str(path))
+    return FitFile(stack, parameters_from_declarations(declarations, str(path)), settings)
+
+
 def load_fit_parameters(path) -> tuple[Stack, list[Parameter]]:
-    """A stack file with free-parameter annotations → ``(stack, [Parameter])`` (schema:
-    :mod:`layerstack_jax.io`, "Free parameters")."""
-    stack, declarations = load_fit_stack(path)
-    return stack, parameters_from_declarations(declarations, str(path))
+    """A stack file with free-parameter annotations → ``(stack, [Parameter])`` (:func:`load_fit_file`)."""
+    f = load_fit_file(path)
+    return f.stack, f.parameters
 
 
 def bspline_basis(wavelength_nm, n_coefficients: int, degree: int = 3) -> np.ndarray:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError
-from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
+from layerstack_jax.io import instrument_geometry, parse_wavelengths
 
 from ._common import PROG, _positive_int, _positive_int_or_auto, _precision, _resolve_geometry
 
@@ -382,8 +382,8 @@ def _cmd_fit_cube(args) -> int:
     with _precision(args.float32):
         import fitting
 
-        stack, params = fitting.load_fit_parameters(args.model)
-        geometry = instrument_geometry(geometry, load_instrument(args.model))
+        stack, params, settings = fitting.load_fit_file(args.model)
+        geometry = instrument_geometry(geometry, settings)
         if not params:
             raise LayerstackError(f"{args.model}: no free parameter (mark one with {{ value = ..., free = true }})")
         if any(p.per_sample for p in params):

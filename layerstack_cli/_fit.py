@@ -11,7 +11,7 @@ from typing import Optional
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError, LayerstackWarning
-from layerstack_jax.io import instrument_geometry, load_instrument, parse_wavelengths
+from layerstack_jax.io import instrument_geometry, parse_wavelengths
 
 from ._columns import prediction_columns
 from ._common import PROG, _positive_int, _precision, _resolve_geometry
@@ -267,8 +267,7 @@ def _cmd_fit_measurement(args, m, start: float) -> int:
     with _precision(args.float32):
         import fitting
 
-        stack, params = fitting.load_fit_parameters(args.stack)
-        settings = load_instrument(args.stack)  # the stack file's [instrument]: offsets, bandwidth …
+        stack, params, settings = fitting.load_fit_file(args.stack)  # [instrument]: offsets, bandwidth …
         datasets, label, origin = _measurement_datasets(m, args, _default_residuals(m, args, stack, settings, params))
         datasets = [dataclasses.replace(d, geometry=instrument_geometry(d.geometry, settings)) for d in datasets]
         if args.wavelengths is not None:
@@ -406,11 +405,11 @@ def _cmd_fit(args) -> int:
         geometry, geometry_origin = _quantity_from_columns(args.geometry.strip(),
                                                            [n for n in columns if n != args.background], args.data)
     grid = data_wl if args.wavelengths is None else parse_wavelengths(args.wavelengths)
-    geometry = instrument_geometry(geometry, load_instrument(args.stack))
     with _precision(args.float32):
         import fitting
 
-        stack, params = fitting.load_fit_parameters(args.stack)
+        stack, params, settings = fitting.load_fit_file(args.stack)
+        geometry = instrument_geometry(geometry, settings)
         names = list(columns)
         if args.columns:
             wanted = [c.strip() for c in args.columns.split(",") if c.strip()]

@@ -11,8 +11,8 @@ from typing import NamedTuple
 import numpy as np
 
 from layerstack_jax import DEFAULT_NODES, LayerstackError, check_stack, parse_geometry, reflectance
-from layerstack_jax.io import (check_instrument_used, instrument_geometry, load_instrument, load_stack, parse_values,
-                               parse_wavelengths, save_spectra_csv)
+from layerstack_jax.io import (check_instrument_used, instrument_geometry, instrument_settings, parse_values,
+                               parse_wavelengths, read_toml, save_spectra_csv, stack_from_dict)
 
 from ._columns import polarized_columns, supports_polarization
 from ._common import PROG, _describe, _parse_geometries, _plot, _positive_int, _positive_int_or_auto, _precision
@@ -307,8 +307,9 @@ def _cmd_predict(args) -> int:
     wavelength = parse_wavelengths(args.wavelengths)
     requested = _parse_geometries(args.geometry)
     with _precision(args.float32):
-        stack = load_stack(args.stack)
-        settings = load_instrument(args.stack)  # the stack file's [instrument], if any: each geometry takes its keys
+        raw = read_toml(Path(args.stack))  # read once: the stack and its [instrument]
+        stack = stack_from_dict(raw, Path(args.stack).parent, source=args.stack)
+        settings = instrument_settings(raw, args.stack)  # the [instrument], if any: each geometry takes its keys
         requested = [(name, instrument_geometry(g, settings, partial=True)) for name, g in requested]
         ellipsometers = [instrument_geometry(parse_geometry(f"ellipsometry:{angle!r}:psi"), settings, partial=True)
                          for angle in args.ellipsometry or ()]  # parsed as spelled: radians are called out

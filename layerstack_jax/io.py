@@ -204,6 +204,7 @@ from ._files.stack_file import InstrumentSettings as InstrumentSettings
 from ._files.stack_file import check_instrument_used as check_instrument_used
 from ._files.stack_file import instrument_geometry as instrument_geometry
 from ._files.stack_file import load_fit_stack as load_fit_stack
+from ._files.stack_file import instrument_settings as instrument_settings
 from ._files.stack_file import load_instrument as load_instrument
 from ._files.stack_file import load_stack as load_stack
 from ._files.stack_file import read_material as read_material
@@ -219,6 +220,7 @@ __all__ = [
     "save_stack",
     "FreeDeclaration",
     "InstrumentSettings",
+    "instrument_settings",
     "load_instrument",
     "instrument_geometry",
     "check_instrument_used",

@@ -36,7 +36,7 @@ from .file_grammar import (
 from .spectra_csv import read_csv_columns
 
 __all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
-           "load_fit_stack", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
+           "load_fit_stack", "instrument_settings", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
            "save_stack"]
 
 _TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "kubelka_munk", "instrument")
@@ -666,17 +666,22 @@ def _instrument_settings(source: str, table: Mapping, free: Optional[list], laye
     return InstrumentSettings(values, static, f"{source}: [instrument]")
 
 
-def load_instrument(path) -> InstrumentSettings:
-    """The ``[instrument]`` table of a stack file (empty settings when it has none), checked like
-    the rest of the file; apply it to a geometry with :func:`instrument_geometry`."""
-    path = Path(path)
-    d = read_toml(path)
+def instrument_settings(d: Mapping, source: str) -> InstrumentSettings:
+    """The ``[instrument]`` table of a parsed stack file ``d`` (from :func:`read_toml`; empty
+    settings when it has none), checked like the rest of the file; ``source`` names the file in
+    messages. Apply it to a geometry with :func:`instrument_geometry`."""
     table = d.get("instrument", {}) if isinstance(d, Mapping) else {}
     if not isinstance(table, Mapping):
-        raise LayerstackError(f"{path}: instrument: must be a table [instrument], got {table!r}")
+        raise LayerstackError(f"{source}: instrument: must be a table [instrument], got {table!r}")
     names = [t.get("name") if isinstance(t, Mapping) else None for t in d.get("layers", [])]
     names = [n if isinstance(n, str) else f"layer {i + 1}" for i, n in enumerate(names)]
-    return _instrument_settings(str(path), table, None, names)
+    return _instrument_settings(source, table, None, names)
+
+
+def load_instrument(path) -> InstrumentSettings:
+    """The ``[instrument]`` table of a stack file (:func:`instrument_settings` of the file read)."""
+    path = Path(path)
+    return instrument_settings(read_toml(path), str(path))
 
 
 def instrument_geometry(geometry, settings: InstrumentSettings, *, partial: bool = False):

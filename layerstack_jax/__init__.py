@@ -55,12 +55,12 @@ from ._stacks.illumination import Response as Response
 from ._stacks.illumination import diffuse as diffuse
 from ._stacks.illumination import snell_invariant as snell_invariant
 from ._stacks.illumination import specular as specular
-from ._instruments.geometry import BRDF as BRDF
-from ._instruments.geometry import Directional as Directional
+from ._instruments.directional import BRDF as BRDF
+from ._instruments.directional import Directional as Directional
 from ._instruments.geometry import Geometry as Geometry
 from ._instruments.geometry import OpticalGeometry as OpticalGeometry
-from ._instruments.geometry import Specular as Specular
-from ._instruments.geometry import Sphere as Sphere
+from ._instruments.specular import Specular as Specular
+from ._instruments.sphere import Sphere as Sphere
 from ._instruments.geometry import fixed_optics as fixed_optics
 from ._instruments.geometry import geometry_kinds as geometry_kinds
 from ._instruments.geometry import invert_background as invert_background

@@ -27,8 +27,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("layerstack_jax", "fitting", "layerstack_cli", "benchmarks")
-GEOMETRY_CLASSES = {"Sphere": "geometry.py", "Directional": "geometry.py", "BRDF": "geometry.py",
-                    "Specular": "geometry.py", "Ellipsometric": "ellipsometry.py"}
+GEOMETRY_CLASSES = {"Sphere": "sphere.py", "Directional": "directional.py", "BRDF": "directional.py",
+                    "Specular": "specular.py", "Ellipsometric": "ellipsometry.py"}
 
 
 def _modules(package: str) -> dict[str, Path]:

@@ -21,7 +21,7 @@ from scipy import integrate
 import fitting as ft
 import layerstack_jax as ls
 from layerstack_cli._columns import polarized_columns
-from layerstack_jax._instruments import geometry as G
+from layerstack_jax._instruments import optical_parts as G
 from layerstack_jax._stacks.stack import resolve
 from layerstack_jax._instruments.instrument import GAP_NM, cap_measure, cone_projected_solid_angle, cone_rule
 

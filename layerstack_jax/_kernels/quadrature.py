@@ -56,7 +56,7 @@ strong clustering at the segment's top and ~48 nodes with every fixed map tried.
 therefore 48 (dcos-2), the only rule measured within 1e-10 everywhere. Its cost is contained by
 :func:`evanescent_beyond`: past the critical angle of a thick medium of real index nothing
 behind that medium is reached, so those segments skip its layers' adding rule (see
-``layerstack_jax._instruments.geometry._reach``); on the P2 benchmark stack half of the nodes are such.
+``layerstack_jax._stacks.illumination._reach``); on the P2 benchmark stack half of the nodes are such.
 """
 
 from __future__ import annotations

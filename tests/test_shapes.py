@@ -125,7 +125,7 @@ NOT_SPECTRA = {
     "fixed_optics": "returns an Optics cache", "invert_background": "shaped like the measurement given",
     "check_stack": "returns None", "coating_tables": "rendering tables (test_render_lookup)",
     "interpolate_k_d": "rendering tables", "interpolate_k_r": "rendering tables", "interpolate_k_t": "rendering tables",
-    "geometry_kinds": "names", "parse_geometry": "parser", "database_version": "string",
+    "geometry_kinds": "names", "parse_geometry": "parser", "shared_readings": "a grouping of geometries (SharedReadings)", "database_version": "string",
     "material": "returns a Material", "material_sources": "names", "as_cube": "cubes", "open_cube": "cubes",
     "read_envi": "cubes", "read_netcdf": "cubes", "read_npy": "cubes", "read_zarr": "cubes",
     "write_zarr_cube": "cubes", "load_fit_stack": "files", "load_stack": "files", "parse_wavelengths": "files",

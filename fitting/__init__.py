@@ -29,8 +29,10 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   robustness tables on top of a stack file; this module owns their format):
   :func:`load_design`, :func:`run_design`, :func:`design_report`, :func:`plot_design`.
 
-Stack files with free-parameter annotations become :class:`Parameter` objects in one place,
-:func:`parameters_from_declarations` (:func:`load_fit_parameters` reads the file).
+The fitting words of a stack file (``{ value = ..., free = true, min = ... }``) are read in one
+place, :mod:`fitting._fit_file`: the stack file's reader returns them unread and
+:func:`parameters_from_annotations` checks them and makes :class:`Parameter` objects
+(:func:`load_fit_file` reads the file once for a fit).
 
 The forward model is always the public :func:`layerstack_jax.reflectance`; fitting never reaches
 inside it. Units: nm, 1/nm, degrees in geometries, as in :mod:`layerstack_jax`.
@@ -76,10 +78,11 @@ from ._parameters import bspline_basis as bspline_basis
 from ._parameters import dispersion as dispersion
 from ._parameters import index_n as index_n
 from ._parameters import instrument as instrument
-from ._parameters import FitFile as FitFile
-from ._parameters import load_fit_file as load_fit_file
-from ._parameters import load_fit_parameters as load_fit_parameters
-from ._parameters import parameters_from_declarations as parameters_from_declarations
+from ._fit_file import FitFile as FitFile
+from ._fit_file import load_fit_file as load_fit_file
+from ._fit_file import load_fit_parameters as load_fit_parameters
+from ._fit_file import parameter_of as parameter_of
+from ._fit_file import parameters_from_annotations as parameters_from_annotations
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult
@@ -141,5 +144,6 @@ __all__ = [
     "load_fit_file",
     "FitFile",
     "load_fit_parameters",
-    "parameters_from_declarations",
+    "parameters_from_annotations",
+    "parameter_of",
 ]

@@ -118,8 +118,17 @@ import numpy as np
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
-from layerstack_jax.io import (FREE_KEYS, FileLocation, is_number, named_tables, read_material, read_number,
-                               read_toml, reject_unknown_keys, stack_from_dict)
+from layerstack_jax.io import (
+    ANNOTATION_KEYS,
+    FileLocation,
+    is_number,
+    named_tables,
+    read_material,
+    read_number,
+    read_toml,
+    reject_unknown_keys,
+    stack_from_dict,
+)
 
 from ._design import (
     ColourTarget,
@@ -133,6 +142,7 @@ from ._design import (
     thickness_yield,
     with_thicknesses,
 )
+from ._fit_file import parameter_of
 
 __all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "TargetOutcome", "DesignOutcome", "load_design", "run_design",
            "design_report", "design_stack_dict", "plot_design"]
@@ -383,19 +393,21 @@ def _targets(source: str, d: Mapping) -> tuple:
     return tuple(out)
 
 
-def _free_thicknesses(source: str, raw_layers: list, declarations: list, stack: ls.Stack):
-    """Indices and bounds of the layers with ``thickness_nm = { ..., free = true }``."""
-    for decl in declarations:
-        if decl.kind != "thickness":
-            raise LayerstackError(f"{decl.where}: {decl.name} is free, but a design optimises layer thicknesses "
-                                  "only: mark thickness_nm free and give the others plain values")
+def _free_thicknesses(source: str, annotations: list, stack: ls.Stack):
+    """Indices and bounds of the layers with ``thickness_nm = { ..., free = true }`` (the file's
+    fitting words, read as for a fit: :func:`fitting.parameter_of`)."""
+    marked = [(a, p) for a, p in ((a, parameter_of(a)) for a in annotations) if p is not None]
+    for a, p in marked:
+        if p.kind != "thickness" or p.path[0] != "layers":
+            raise LayerstackError(f"{a.where.source}: {a.where.table}: {p.name} is free, but a design optimises "
+                                  "layer thicknesses only: mark thickness_nm free and give the others plain values")
+    names = [layer.name for layer in stack.layers]
     free, lower, upper = [], [], []
-    for i, t in enumerate(raw_layers):
-        spec = t.get("thickness_nm")
-        if not (isinstance(spec, Mapping) and spec.get("free") is True):
-            continue
-        where = FileLocation(source, f"[[layers]] no. {i + 1} ({stack.layers[i].name!r})")
-        lo, hi = float(spec.get("min", 0.0)), float(spec.get("max", _DEFAULT_MAX_NM))
+    for _, p in marked:
+        i = names.index(p.path[1])
+        where = FileLocation(source, f"[[layers]] no. {i + 1} ({names[i]!r})")
+        lo = 0.0 if p.lower is None else float(p.lower)
+        hi = _DEFAULT_MAX_NM if p.upper is None else float(p.upper)
         if lo < 0:
             raise where.error(f"min must be >= 0 nm, got {lo:g}", "thickness_nm")
         if not hi > lo:
@@ -474,8 +486,9 @@ def _check_grids(source: str, stack: ls.Stack, targets: tuple, needle: Optional[
 def _layer_spec(t: Mapping) -> dict:
     """A file's layer table without its thickness and free-parameter keys."""
     def plain(spec):
-        if isinstance(spec, Mapping) and any(k in spec for k in FREE_KEYS):
-            return spec["value"] if "value" in spec else {k: v for k, v in spec.items() if k not in FREE_KEYS}
+        words = ("value",) + ANNOTATION_KEYS
+        if isinstance(spec, Mapping) and any(k in spec for k in words):
+            return spec["value"] if "value" in spec else {k: v for k, v in spec.items() if k not in words}
         return spec
 
     return {k: plain(v) for k, v in t.items() if k not in ("thickness_nm", "name")}
@@ -487,14 +500,14 @@ def load_design(path) -> DesignFile:
     source = str(path)
     d = read_toml(path, "design file")
     raw = {k: v for k, v in d.items() if k not in _DESIGN_KEYS}
-    declarations: list = []
-    stack = stack_from_dict(raw, path.parent, source=source, free=declarations)
+    annotations: list = []
+    stack = stack_from_dict(raw, path.parent, source=source, annotations=annotations)
     if stack.exit.diffuse:
         raise FileLocation(source, "[background]").error(
             "design targets are specular R / T / A of films on a [substrate]; a Lambertian [background] "
             "is not supported")
     raw_layers = raw.get("layers", [])
-    free, lower, upper = _free_thicknesses(source, raw_layers, declarations, stack)
+    free, lower, upper = _free_thicknesses(source, annotations, stack)
     targets = _targets(source, d)
 
     top = FileLocation(source, "top level")

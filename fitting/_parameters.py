@@ -45,8 +45,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
-from typing import NamedTuple, Optional, Sequence, Union
+from typing import Optional, Sequence, Union
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -54,13 +53,8 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from layerstack_jax import Cauchy, Index, LayerstackError, RealLike, Sellmeier, Stack, as_spectrum, leaf_role_at
-from layerstack_jax.io import FreeDeclaration, InstrumentSettings, instrument_settings, read_toml, stack_from_dict
 
 __all__ = [
-    "parameters_from_declarations",
-    "load_fit_parameters",
-    "load_fit_file",
-    "FitFile",
     "Parameter",
     "thickness",
     "alpha",
@@ -284,55 +278,6 @@ def is_instrument_path(path: tuple) -> bool:
 
 
 # --------------------------------------------------------------------------- basis
-def parameters_from_declarations(declarations: Sequence[FreeDeclaration], source: str = "") -> list[Parameter]:
-    """The :class:`Parameter` of each free-parameter annotation of a stack file, by name.
-
-    ``declarations``: the :class:`~layerstack_jax.io.FreeDeclaration` records of
-    :func:`layerstack_jax.io.load_fit_stack` (bounds in the file's units: nm, 1/nm, fraction);
-    ``source``: the file, for the message when there is none. This is the one place where the
-    stack-file annotations become fitting parameters.
-    """
-    params = [
-        Parameter(path=tuple(d.path), kind=d.kind, name=d.name, lower=d.lower, upper=d.upper, basis=d.basis,
-                  per_sample=d.per_sample, smoothness=d.smoothness,
-                  # a per-sample number written as a list: each sample's start, the known ones fixed
-                  value=None if d.values is None else np.asarray(d.values, float),
-                  fixed=None if d.known is None else np.asarray(d.known, bool))
-        for d in declarations
-    ]
-    if not params:
-        raise LayerstackError(f"{source or 'stack file'}: no free parameter: mark some with e.g. "
-                              "thickness_nm = { value = 30000, free = true }")
-    return params
-
-
-class FitFile(NamedTuple):
-    """A stack file read for a fit (:func:`load_fit_file`): the stack, its free parameters and
-    its ``[instrument]`` settings."""
-
-    stack: Stack
-    parameters: list
-    instrument: InstrumentSettings
-
-
-def load_fit_file(path) -> FitFile:
-    """A stack file with free-parameter annotations, read once: the stack, ``[Parameter]`` of its
-    annotations (schema: :mod:`layerstack_jax.io`, "Free parameters") and its ``[instrument]``
-    settings (:func:`layerstack_jax.io.instrument_settings`)."""
-    path = Path(path)
-    raw = read_toml(path)
-    declarations: list = []
-    stack = stack_from_dict(raw, path.parent, source=str(path), free=declarations)
-    settings = instrument_settings(raw, str(path))
-    return FitFile(stack, parameters_from_declarations(declarations, str(path)), settings)
-
-
-def load_fit_parameters(path) -> tuple[Stack, list[Parameter]]:
-    """A stack file with free-parameter annotations → ``(stack, [Parameter])`` (:func:`load_fit_file`)."""
-    f = load_fit_file(path)
-    return f.stack, f.parameters
-
-
 def bspline_basis(wavelength_nm, n_coefficients: int, degree: int = 3) -> np.ndarray:
     """Clamped B-spline basis on uniform knots spanning the grid, ``(wl, n_coefficients)``.
 

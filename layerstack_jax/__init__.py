@@ -131,7 +131,6 @@ from ._base.validate import LayerstackError as LayerstackError
 from ._base.validate import LayerstackWarning as LayerstackWarning
 from ._base.validate import traced_checks_off as traced_checks_off
 from .io import Measurement as Measurement
-from .io import load_fit_stack as load_fit_stack
 from .io import load_stack as load_stack
 from .io import parse_wavelengths as parse_wavelengths
 from .io import read_csv_columns as read_csv_columns
@@ -204,7 +203,6 @@ __all__ = [
     "leaf",
     "leaf_role_at",
     "LeafRole",
-    "load_fit_stack",
     "load_stack",
     "Looyenga",
     "Lorentz",

@@ -41,7 +41,8 @@ memory, :func:`stack_from_dict`). Layers are listed from the side the light come
     # [[kubelka_munk.pigments]]   name = "red", K_per_nm = ..., S_per_nm = ..., concentration = 0.4
     # (exactly one exit table: [substrate], [background] or [kubelka_munk]; layerstack_jax.KubelkaMunk)
 
-Free parameters (for ``layerstack fit``; read by :func:`load_fit_stack` into :class:`FreeDeclaration` records): a layer's ``thickness_nm``, ``alpha_per_nm``, ``n`` and
+Free parameters (for ``layerstack fit``; the reader returns them as :class:`Annotation` records, read by
+:func:`fitting.load_fit_file`): a layer's ``thickness_nm``, ``alpha_per_nm``, ``n`` and
 ``k`` (numbers), the background's ``rho_g`` and a Kubelka–Munk body's ``thickness_nm``,
 ``ground_reflectance`` and pigment ``concentration`` s may be written as an inline table that adds
 fitting information to the value::
@@ -60,7 +61,8 @@ thickness measured::
     thickness_nm = { value = [115000, 480000], free = true, per_sample = true, known = [true, false] }
 
 :func:`load_stack` ignores these keys (the value is used; of a list, the first);
-:func:`load_fit_stack` also returns the declarations. Tables of α, ρg or k whose rounding or
+``stack_from_dict(d, annotations=[])`` also returns them, unread (:data:`ANNOTATION_KEYS`), and
+:mod:`fitting` checks and interprets them. Tables of α, ρg or k whose rounding or
 baseline noise dips below 0 by at most 1e-3 of the table's largest value are clipped to 0 with a
 :class:`LayerstackWarning`; larger negative values are refused.
 
@@ -147,7 +149,7 @@ Files built on the stack file
 Design files (``layerstack design``) add ``[[targets]]``, ``[optimizer]`` and ``[robustness]``
 tables to a stack file; their format belongs to :mod:`fitting` (see ``fitting._design_file``),
 which reads them with the same grammar (:class:`FileLocation`, :func:`reject_unknown_keys`,
-:func:`read_number`, :func:`read_material`, :data:`FREE_KEYS`, :func:`stack_from_dict`), so
+:func:`read_number`, :func:`read_material`, :data:`ANNOTATION_KEYS`, :func:`stack_from_dict`), so
 every message has the same form.
 
 Measurement files
@@ -198,12 +200,11 @@ from ._files.spectra_csv import parse_wavelengths as parse_wavelengths
 from ._files.spectra_csv import read_csv_columns as read_csv_columns
 from ._files.spectra_csv import read_spectra_csv as read_spectra_csv
 from ._files.spectra_csv import save_spectra_csv as save_spectra_csv
-from ._files.stack_file import FREE_KEYS as FREE_KEYS
-from ._files.stack_file import FreeDeclaration as FreeDeclaration
+from ._files.stack_file import ANNOTATION_KEYS as ANNOTATION_KEYS
+from ._files.stack_file import Annotation as Annotation
 from ._files.stack_file import InstrumentSettings as InstrumentSettings
 from ._files.stack_file import check_instrument_used as check_instrument_used
 from ._files.stack_file import instrument_geometry as instrument_geometry
-from ._files.stack_file import load_fit_stack as load_fit_stack
 from ._files.stack_file import instrument_settings as instrument_settings
 from ._files.stack_file import load_instrument as load_instrument
 from ._files.stack_file import load_stack as load_stack
@@ -214,11 +215,10 @@ from ._files.stack_file import stack_to_dict as stack_to_dict
 
 __all__ = [
     "load_stack",
-    "load_fit_stack",
     "stack_from_dict",
     "stack_to_dict",
     "save_stack",
-    "FreeDeclaration",
+    "Annotation",
     "InstrumentSettings",
     "instrument_settings",
     "load_instrument",
@@ -230,7 +230,7 @@ __all__ = [
     "save_spectra_csv",
     "parse_values",
     "parse_wavelengths",
-    "FREE_KEYS",
+    "ANNOTATION_KEYS",
     "FileLocation",
     "named_tables",
     "reject_unknown_keys",

@@ -1,4 +1,5 @@
-"""`layerstack fit` and free parameters in stack files (layerstack_jax.io.load_fit_stack).
+"""`layerstack fit` and free parameters in stack files (the reader returns the fitting words
+unread, ``layerstack_jax.io.Annotation``; ``fitting.load_fit_parameters`` makes parameters of them).
 
 The data are made by the public forward model with known values; the command line must give
 them back. A cheap model (an absorbing slab on glass, specular transmittance) keeps compilation
@@ -14,7 +15,8 @@ import pytest
 
 import layerstack_jax as ls
 from layerstack_cli import main
-from layerstack_jax.io import load_fit_stack, load_stack, save_spectra_csv
+import fitting as ft
+from layerstack_jax.io import load_stack, read_toml, save_spectra_csv, stack_from_dict
 
 WL = np.arange(400.0, 701.0, 10.0)
 
@@ -36,22 +38,23 @@ def _truth(h, alpha):
     return np.asarray(ls.reflectance(st, WL, ls.Specular(0.0, "T")))
 
 
-def test_load_fit_stack_declarations(tmp_path):
+def test_the_reader_returns_fitting_words_unread_and_fitting_makes_parameters_of_them(tmp_path):
     f = tmp_path / "s.toml"
     f.write_text(STACK.format(alpha="{ value = 2e-5, free = true, basis = 4 }"))
-    stack, free = load_fit_stack(f)
+    found: list = []
+    stack = stack_from_dict(read_toml(f), f.parent, source=str(f), annotations=found)
     assert float(stack.layers[0].thickness) == 8000.0
-    assert [d.kind for d in free] == ["thickness", "alpha"]
-    assert free[0].path == ("layers", "slab", "thickness") and free[0].upper == 1e5
-    assert free[1].basis == 4
-    # the one place where annotations become fitting parameters: by name, every field carried
-    import fitting as ft
-
+    assert [(a.path, a.kind, a.name, a.key, a.words, a.spectral) for a in found] == [
+        (("layers", "slab", "thickness"), "thickness", "thickness_nm[slab]", "thickness_nm",
+         {"free": True, "min": 0, "max": 1e5}, False),
+        (("layers", "slab", "alpha"), "alpha", "alpha_per_nm[slab]", "alpha_per_nm", {"free": True, "basis": 4}, True),
+    ]
+    # fitting reads the words: the file's bounds and basis, in the file's units
     _, params = ft.load_fit_parameters(f)
     assert [(p.path, p.kind, p.name, p.lower, p.upper, p.basis) for p in params] == [
-        (d.path, d.kind, d.name, d.lower, d.upper, d.basis) for d in free
+        (("layers", "slab", "thickness"), "thickness", "thickness_nm[slab]", 0.0, 1e5, None),
+        (("layers", "slab", "alpha"), "alpha", "alpha_per_nm[slab]", None, None, 4),
     ]
-    assert params[1].basis == 4 and params[0].upper == 1e5
     # load_stack reads the same file, values only
     assert float(load_stack(f).layers[0].alpha) == 2e-5
 
@@ -69,7 +72,9 @@ def test_bad_free_declarations(tmp_path, alpha, message):
     f = tmp_path / "s.toml"
     f.write_text(STACK.format(alpha=alpha))
     with pytest.raises(ls.LayerstackError, match=message):
-        load_fit_stack(f)
+        ft.load_fit_parameters(f)
+    if message != "missing value":  # the words are fitting's: a prediction reads the value and skips them
+        assert float(load_stack(f).layers[0].alpha) == 2e-5
 
 
 def test_cli_fit_recovers_thickness(tmp_path, capsys):

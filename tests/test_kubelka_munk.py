@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, solve_ivp
 
+import fitting as ft
 import layerstack_jax as ls
 
 WL = np.linspace(400.0, 700.0, 7)
@@ -339,7 +340,7 @@ def _by_hand(thickness=30000.0):
 
 def test_a_body_in_a_stack_file(tmp_path):
     (tmp_path / "s.toml").write_text(BODY_FILE)
-    stack, declared = ls.load_fit_stack(tmp_path / "s.toml")
+    stack, declared = ft.load_fit_parameters(tmp_path / "s.toml")
     assert [(d.path, d.name, d.upper) for d in declared] == [
         (("exit", "thickness"), "thickness_nm", 1e5), (("exit", "paint", "concentrations", 1), "concentration[red]", 2)]
     np.testing.assert_allclose(np.asarray(ls.reflectance(stack, WL, ls.Directional(45.0, 0.0))),
@@ -398,7 +399,6 @@ def test_concentrations_fitted_under_a_varnish():
     """Three pigments in an opaque body under a varnish, 45°/0°: an opaque body fixes only the
     ratios of the concentrations (K/S is unchanged when all are scaled), so the white is held at
     its value and the two others are fitted, with the Fresnel algebra computed once."""
-    import fitting as ft
 
     wl = np.linspace(400.0, 700.0, 31)
     bell = lambda mu, w: np.exp(-0.5 * ((wl - mu) / w) ** 2)  # noqa: E731

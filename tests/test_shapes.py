@@ -128,7 +128,7 @@ NOT_SPECTRA = {
     "geometry_kinds": "names", "parse_geometry": "parser", "shared_readings": "a grouping of geometries (SharedReadings)", "database_version": "string",
     "material": "returns a Material", "material_sources": "names", "as_cube": "cubes", "open_cube": "cubes",
     "read_envi": "cubes", "read_netcdf": "cubes", "read_npy": "cubes", "read_zarr": "cubes",
-    "write_zarr_cube": "cubes", "load_fit_stack": "files", "load_stack": "files", "parse_wavelengths": "files",
+    "write_zarr_cube": "cubes", "load_stack": "files", "parse_wavelengths": "files",
     "read_csv_columns": "files", "read_measurement": "files", "read_spectra_csv": "files",
     "save_spectra_csv": "files", "save_stack": "files", "stack_from_dict": "files", "stack_to_dict": "files",
     "write_measurement_csv": "files", "memory_budget": "memory for chunk='auto' (test_auto_chunks)",

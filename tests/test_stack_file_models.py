@@ -14,7 +14,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from layerstack_jax.io import load_fit_stack, load_stack, save_stack
+from layerstack_jax.io import load_stack, save_stack
 
 MODEL = """
 [[layers]]
@@ -43,7 +43,7 @@ def _truth(h=60.0, a=200.0, cauchy_a=1.46):
 def test_models_and_free_coefficients_read_as_built_in_python(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(MODEL)
-    stack, declarations = load_fit_stack(path)
+    stack, declarations = ft.load_fit_parameters(path)
     wl = np.linspace(300.0, 900.0, 61)
     want = _truth(50.0, 150.0, 1.40)
     for got, ref in zip(stack.layers, want.layers):
@@ -148,7 +148,7 @@ n = 1.5
 n = { drude = { Ep = { value = 9.0, free = true }, gamma = 0.07 } }
 """)
     with pytest.raises(ls.LayerstackError, match="free coefficients are declared in \\[\\[layers\\]\\] only"):
-        load_fit_stack(tmp_path / "s.toml")
+        load_stack(tmp_path / "s.toml")
     (tmp_path / "k.toml").write_text("""
 [[layers]]
 name = "film"
@@ -201,7 +201,7 @@ def _mixed_truth(fraction=0.5, b1=0.6961663):
 def test_effective_media_and_sellmeier_terms_read_as_built_in_python(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(MIXED)
-    stack, declarations = load_fit_stack(path)
+    stack, declarations = ft.load_fit_parameters(path)
     wl = np.linspace(300.0, 900.0, 61)
     tl = ls.TaucLorentz(Eg=3.2, A=150.0, E0=4.2, C=1.5, eps_inf=2.2)
     want = [ls.Bruggeman([ls.Cauchy(1.46, 0.004), ls.Index(1.0)], 0.3),
@@ -331,4 +331,4 @@ def test_a_parameter_path_may_end_with_an_element_index():
     ("{ sellmeier = { B = { value = 0.7, free = true }, C = [0.005] } }", "sellmeier B must be a non-empty list"),
 ])
 def test_mixture_and_sellmeier_errors_name_file_layer_and_coefficient(tmp_path, n_spec, message):
-    _refused(tmp_path, n_spec, message, load_fit_stack)
+    _refused(tmp_path, n_spec, message, ft.load_fit_parameters)

@@ -1,9 +1,9 @@
 r"""Stack files: the TOML schema of a :class:`~layerstack_jax.Stack` (documented in
 :mod:`layerstack_jax.io`), read by :func:`load_stack` / :func:`stack_from_dict`, written by
-:func:`save_stack` / :func:`stack_to_dict`. This module is the schema's one owner: the free-
-parameter annotations (``{ value = ..., free = true, min = ..., max = ... }``) are parsed here
-into typed :class:`FreeDeclaration` records, which :mod:`fitting` turns into its ``Parameter``
-objects by name.
+:func:`save_stack` / :func:`stack_to_dict`. This module is the schema's one owner. A value may
+carry fitting words beside it (``{ value = ..., free = true, min = ..., max = ... }``,
+:data:`ANNOTATION_KEYS`): the reader takes the value and returns the words unread, as
+:class:`Annotation` records; :mod:`fitting` reads them.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Mapping, NamedTuple, Optional, Union
+from typing import Mapping, NamedTuple, Optional
 
 import numpy as np
 
@@ -35,8 +35,8 @@ from .file_grammar import (
 )
 from .spectra_csv import read_csv_columns
 
-__all__ = ["FREE_KEYS", "FreeDeclaration", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
-           "load_fit_stack", "instrument_settings", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
+__all__ = ["ANNOTATION_KEYS", "Annotation", "InstrumentSettings", "read_material", "stack_from_dict", "load_stack",
+           "instrument_settings", "load_instrument", "instrument_geometry", "check_instrument_used", "stack_to_dict",
            "save_stack"]
 
 _TOP_KEYS = ("description", "ambient", "layers", "substrate", "background", "kubelka_munk", "instrument")
@@ -77,19 +77,19 @@ def _read_table(where: FileLocation, key: str, base_dir: Path, filename, require
 
 
 # --------------------------------------------------------------------------- materials
-def _coefficient(where: FileLocation, model: str, field: str, spec, path: Optional[tuple], free: Optional[list],
+def _coefficient(where: FileLocation, model: str, field: str, spec, path: Optional[tuple], annotations: Optional[list],
                  *, lower=None, upper=None):
     """One coefficient of a dispersion model: a number, a list of numbers (one per oscillator or
-    term), or a free-parameter table — the coefficient itself, recorded in ``free`` under ``path
-    + (field,)`` as ``model.field[layer]``, or one entry of a list, under ``path + (field, i)`` as
-    ``model.field1[layer]``, ``model.field2[layer]`` … (1-based, as vendor software numbers
-    terms). ``lower``/``upper``: the coefficient's physical range; declared bounds must lie in
-    it, and are it when not given."""
+    term), or a table with fitting words — the coefficient itself, recorded in ``annotations``
+    under ``path + (field,)`` as ``model.field[layer]``, or one entry of a list, under ``path +
+    (field, i)`` as ``model.field1[layer]``, ``model.field2[layer]`` … (1-based, as vendor
+    software numbers terms). ``lower``/``upper``: the coefficient's physical range (recorded as
+    the annotation's ``value_range``)."""
     key = f"{model}.{field}"
     if isinstance(spec, dict):
-        return _free_coefficient(where, key, spec, path, (field,), free, lower, upper)
+        return _free_coefficient(where, key, spec, path, (field,), annotations, lower, upper)
     if isinstance(spec, list) and any(isinstance(v, dict) for v in spec):
-        spec = [_free_coefficient(where, f"{key}{i + 1}", v, path, (field, i), free, lower, upper)
+        spec = [_free_coefficient(where, f"{key}{i + 1}", v, path, (field, i), annotations, lower, upper)
                 if isinstance(v, dict) else v for i, v in enumerate(spec)]
     if is_number(spec):
         return float(spec)
@@ -97,24 +97,16 @@ def _coefficient(where: FileLocation, model: str, field: str, spec, path: Option
 
 
 def _free_coefficient(where: FileLocation, key: str, spec: dict, path: Optional[tuple], field: tuple,
-                      free: Optional[list], lower, upper) -> float:
-    """A coefficient written as a free-parameter table (:func:`_coefficient`): its value."""
+                      annotations: Optional[list], lower, upper) -> float:
+    """A coefficient written as a table with fitting words (:func:`_coefficient`): its value."""
     if path is None:
         raise where.error(f"{key}: free coefficients are declared in [[layers]] only", "n")
-    found: list = []
-    value = read_number(where, "n", _split_free(where, key, spec, path + field, "other", found, spectral=False), what=key)
-    if found and (lower is not None or upper is not None):
-        d = found[0]
-        lo, hi = (lower if d.lower is None else d.lower), (upper if d.upper is None else d.upper)
-        if (lower is not None and lo < lower) or (upper is not None and hi > upper):
-            raise where.error(f"{key}: bounds [{lo:g}, {hi:g}] outside the range [{lower:g}, {upper:g}]", "n")
-        found = [d._replace(lower=lo, upper=hi)]
-    if free is not None:
-        free.extend(found)
-    return value
+    value_range = None if lower is None and upper is None else (lower, upper)
+    spec = _annotated(where, key, spec, path + field, "other", annotations, spectral=False, value_range=value_range)
+    return read_number(where, "n", spec, what=key)
 
 
-def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple], free: Optional[list],
+def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple], annotations: Optional[list],
                     prefix: str = "") -> Material:
     """``n = { <model> = { coefficient = ..., ... } }`` (:data:`_MODELS`)."""
     cls = _MODELS[kind]
@@ -126,7 +118,7 @@ def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple]
     missing = [f.name for f in fields if f.default is dataclasses.MISSING and f.name not in value]
     if missing:
         raise where.error(f"{kind} needs {', '.join(missing)} (coefficients: {', '.join(names)})", "n")
-    coefficients = {name: _coefficient(where, prefix + kind, name, value[name], path, free)
+    coefficients = {name: _coefficient(where, prefix + kind, name, value[name], path, annotations)
                     for name in names if name in value}
     try:
         return cls(**coefficients)
@@ -135,11 +127,11 @@ def _model_material(where: FileLocation, kind: str, value, path: Optional[tuple]
 
 
 def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_k: bool, label: str,
-                  path: Optional[tuple] = None, free: Optional[list] = None, prefix: str = "") -> Material:
+                  path: Optional[tuple] = None, annotations: Optional[list] = None, prefix: str = "") -> Material:
     """The material of a table with an ``n`` key (and optionally ``k``). ``path``: where the
     material sits in the stack (``("layers", name, "index")``) when its coefficients may be
-    declared free; their declarations are appended to ``free``, named ``prefix`` + e.g.
-    ``cauchy.A[layer]`` (``prefix``: the constituent of an effective medium, ``"bruggeman.materials1."``)."""
+    declared free; their :class:`Annotation` records are appended to ``annotations``, named
+    ``prefix`` + e.g. ``cauchy.A[layer]`` (``prefix``: the constituent of an effective medium, ``"bruggeman.materials1."``)."""
     if "n" not in table:
         raise where.error("missing (refractive index: a number or a dispersion table)", "n")
     spec = table["n"]
@@ -180,13 +172,13 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
         if k_given:
             raise where.error(f"not allowed with n = {{ {kind} = ... }}: the model gives k itself", "k")
         if kind in _MIXTURES:
-            return _mixture(where, kind, value, base_dir, label, path, free, prefix, allow_k)
-        return _model_material(where, kind, value, path, free, prefix)
+            return _mixture(where, kind, value, base_dir, label, path, annotations, prefix, allow_k)
+        return _model_material(where, kind, value, path, annotations, prefix)
     if kind == "cauchy":
         if isinstance(value, list) and any(isinstance(v, dict) for v in value):  # free coefficients
             if len(value) > 3:
                 raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {len(value)}", "n")
-            value = [_coefficient(where, prefix + "cauchy", c, v, path, free) for c, v in zip("ABC", value)]
+            value = [_coefficient(where, prefix + "cauchy", c, v, path, annotations) for c, v in zip("ABC", value)]
         coef = read_number_list(where, "n", value, "cauchy coefficients [A, B, C]")
         if coef.size > 3:
             raise where.error(f"cauchy takes 1 to 3 coefficients [A, B, C] (λ in µm), got {coef.size}", "n")
@@ -200,7 +192,7 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
         reject_unknown_keys(FileLocation(where.source, f"{where.table}: key 'n': sellmeier"), value, ("B", "C"))
         if "B" not in value or "C" not in value:
             raise where.error("sellmeier needs both B = [...] and C = [...] (C in µm²)", "n")
-        B, C = (_coefficient(where, prefix + "sellmeier", c, value[c], path, free) if isinstance(value[c], list)
+        B, C = (_coefficient(where, prefix + "sellmeier", c, value[c], path, annotations) if isinstance(value[c], list)
                 else read_number_list(where, "n", value[c], f"sellmeier {c}") for c in ("B", "C"))
         if B.shape != C.shape:
             raise where.error(f"sellmeier B and C must have the same length, got {B.size} and {C.size}", "n")
@@ -212,7 +204,7 @@ def read_material(where: FileLocation, table: Mapping, base_dir: Path, *, allow_
 
 
 def _mixture(where: FileLocation, kind: str, value, base_dir: Path, label: str, path: Optional[tuple],
-             free: Optional[list], prefix: str, allow_k: bool) -> Material:
+             annotations: Optional[list], prefix: str, allow_k: bool) -> Material:
     """``n = { bruggeman = { materials = [<n>, <n>, ...], fractions = f } }`` (:data:`_MIXTURES`):
     each constituent as ``n`` is written (or ``{ n = ..., k = ... }``), its free coefficients
     named ``bruggeman.materials1.cauchy.A[layer]``; ``fractions`` the volume fraction(s) of the
@@ -236,9 +228,9 @@ def _mixture(where: FileLocation, kind: str, value, base_dir: Path, label: str, 
         table = m if isinstance(m, dict) and "n" in m and set(m) <= {"n", "k"} else {"n": m}
         at = FileLocation(where.source, f"{where.table}: {kind} material {i + 1}")
         materials.append(read_material(at, table, base_dir, allow_k=allow_k, label=f"{label} {kind} material {i + 1}",
-                                       path=None if path is None else path + ("materials", i), free=free,
+                                       path=None if path is None else path + ("materials", i), annotations=annotations,
                                        prefix=f"{prefix}{kind}.materials{i + 1}."))
-    f = _coefficient(where, prefix + kind, "fractions", fractions, path, free, lower=0.0, upper=1.0)
+    f = _coefficient(where, prefix + kind, "fractions", fractions, path, annotations, lower=0.0, upper=1.0)
     try:
         return cls(materials, f)
     except LayerstackError as e:
@@ -338,143 +330,93 @@ def _spectrum(where: FileLocation, key: str, spec, base_dir: Path, column: str, 
     return TabulatedSpectrum(wl, values, name=name)
 
 
-FREE_KEYS = ("value", "free", "min", "max", "basis", "per_sample", "known", "smoothness")
+#: The words a stack file may write beside a value for a fit: ``thickness_nm = { value = 30000,
+#: free = true, min = 0, max = 1e5 }``. The reader takes the value and hands the words on,
+#: unread, as an :class:`Annotation`; what they mean (and which values they may take) belongs to
+#: :mod:`fitting`, which reads them.
+ANNOTATION_KEYS = ("free", "min", "max", "basis", "per_sample", "known", "smoothness")
 
 
-class FreeDeclaration(NamedTuple):
-    """One free-parameter annotation of a stack file, as written there (schema: :mod:`layerstack_jax.io`).
+class Annotation(NamedTuple):
+    """A value of a stack file written with fitting words beside it (:data:`ANNOTATION_KEYS`),
+    as found in the file: the reader has taken the value; the words are not interpreted here.
 
     Attributes:
         path: where the value lives in the stack, layers by name: ``("layers", "varnish",
             "thickness")``, ``("layers", "varnish", "alpha")``, ``("layers", name, "index", "n")``,
             ``("exit", "reflectance")``; a model coefficient ``("layers", name, "index", "A")``,
             one entry of a list ``("layers", name, "index", "B", 0)`` (0-based here, 1-based in
-            the name), a constituent's ``("layers", name, "index", "materials", 0, "A")``.
-        kind: ``"thickness"`` (nm), ``"alpha"`` (1/nm), ``"rho_g"`` (fraction), ``"n"``,
-            ``"coefficient"`` (the extinction coefficient k) or ``"other"`` (model coefficients,
-            effective-medium fractions).
+            the name), a constituent's ``("layers", name, "index", "materials", 0, "A")``; a
+            field of the ``[instrument]`` table ``("datasets", "all", "angle_offset_deg")``.
+        kind: what the value is: ``"thickness"`` (nm, also a pigment concentration: a number
+            ≥ 0), ``"alpha"`` (1/nm), ``"rho_g"`` (fraction), ``"n"``, ``"coefficient"`` (the
+            extinction coefficient k) or ``"other"`` (model coefficients, effective-medium
+            fractions, instrument fields).
         name: a display name such as ``"thickness_nm[varnish]"``.
-        lower, upper: the bounds written in the file, in the parameter's file unit (None: the
-            fitting default of that kind).
-        basis: spectra only: number of B-spline functions, ``"free"`` (one value per
-            wavelength) or None (one value).
-        per_sample: one value per spectrum in a joint fit.
-        smoothness: weight of the smoothness penalty of a spectrum (≥ 0).
-        where: ``"<file>: <table>"`` for messages.
-        values: a per-sample number written as a list (``value = [115000, 480000]``): the
-            starting value of each sample, in the file's unit (None: the one value for all).
-        known: with ``values``, ``known = [true, false]``: the samples whose value is known
-            (kept at it, not fitted); None: none.
+        key: the key the value is written under, for messages (``"thickness_nm"``, ``"B1"``).
+        where: the table it is written in, for messages (``where.error(message, key)``).
+        words: the fitting words as written (``{"free": True, "min": 0}``), unchecked.
+        value: a number written as ``value = [a, b, ...]``, the list as written (the stack
+            holds its first entry); None otherwise.
+        spectral: the value is a spectrum (``alpha_per_nm``, ``rho_g``, ``ground_reflectance``).
+        value_range: the value's physical range where the file's reader fixes one (an
+            effective medium's volume fractions: ``(0.0, 1.0)``); None otherwise.
     """
 
     path: tuple
     kind: str
     name: str
-    lower: Optional[float]
-    upper: Optional[float]
-    basis: Union[None, str, int, np.ndarray]
-    per_sample: bool
-    smoothness: float
-    where: str
-    values: Optional[tuple] = None
-    known: Optional[tuple] = None
+    key: str
+    where: FileLocation
+    words: dict
+    value: Optional[list] = None
+    spectral: bool = False
+    value_range: Optional[tuple] = None
 
 
-def _per_sample_values(where: FileLocation, key: str, decl: dict, values) -> tuple:
-    """``(values, known)`` of a per-sample number written as a list (``value = [a, b, ...]``,
-    optional ``known = [true, false, ...]``), checked; ``values`` None for a single number."""
-    known = decl.get("known")
-    if values is None:
-        if known is not None:
-            raise where.error("known = [...] marks samples of a per-sample value: write value = [one number per "
-                              "sample] with the known samples' values", key)
-        return None, None
-    if not decl.get("per_sample", False):
-        raise where.error(f"value = [...] gives one value per sample: add per_sample = true (got {values!r})", key)
-    if not values or not all(is_number(v) and math.isfinite(float(v)) for v in values):
-        raise where.error(f"value must be a number, or a list of numbers (one per sample), got {values!r}", key)
-    values = tuple(float(v) for v in values)
-    if known is None:
-        return values, None
-    if not (isinstance(known, list) and all(isinstance(k, bool) for k in known)):
-        raise where.error(f"known must be a list of true/false, one per sample, got {known!r}", key)
-    if len(known) != len(values):
-        raise where.error(f"known has {len(known)} entries for {len(values)} values (one per sample)", key)
-    if all(known):
-        raise where.error("every sample's value is known: nothing is left to fit (drop free, or mark a sample false)",
-                          key)
-    return values, tuple(known)
-
-
-def _split_free(where: FileLocation, key: str, spec, path: tuple, kind: str, free: Optional[list], *, spectral: bool):
-    """Strip the free-parameter keys of ``spec`` (module docstring), record the declaration in
-    ``free`` (when a list) and return the plain value spec."""
-    if not isinstance(spec, dict) or not any(k in spec for k in FREE_KEYS):
+def _annotated(where: FileLocation, key: str, spec, path: tuple, kind: str, annotations: Optional[list], *,
+               spectral: bool, name: Optional[str] = None, value_range: Optional[tuple] = None):
+    """The plain value spec of ``spec``: itself, or, when it is a table with fitting words
+    (``{ value = ..., free = true, ... }``; for spectra the spectrum's own keys may stand for
+    ``value``), its value — the words are recorded in ``annotations`` (when a list) as an
+    :class:`Annotation`. A per-sample list ``value = [a, b, ...]`` gives its first entry."""
+    if not isinstance(spec, dict) or not any(k in spec for k in ("value",) + ANNOTATION_KEYS):
         return spec
-    decl = {k: spec[k] for k in FREE_KEYS if k in spec}
-    rest = {k: v for k, v in spec.items() if k not in FREE_KEYS}
-    if "value" in decl:
+    words = {k: spec[k] for k in ANNOTATION_KEYS if k in spec}
+    rest = {k: v for k, v in spec.items() if k not in ANNOTATION_KEYS and k != "value"}
+    listed = None
+    if "value" in spec:
         if rest:
             raise where.error(f"give either value = ... or {', '.join(rest)}, not both", key)
-        plain = decl.pop("value")
-        listed = isinstance(plain, list) and not spectral
-        if not (is_number(plain) or listed):
+        plain = spec["value"]
+        if isinstance(plain, list) and not spectral:
+            if not plain or not all(is_number(v) for v in plain):
+                raise where.error(f"value must be a number, or a list of numbers (one per sample), got {plain!r}", key)
+            listed, plain = list(plain), plain[0]  # the stack itself holds one value: the first sample's
+        elif not is_number(plain):
             raise where.error(f"value must be a number{'' if spectral else ', or a list of numbers (one per sample, with per_sample = true)'}, got {plain!r}", key)
     elif rest and spectral:
         plain = rest
     else:
         raise where.error("missing value = <number> next to free/min/max", key)
-    is_free = decl.get("free", False)
-    if not isinstance(is_free, bool):
-        raise where.error(f"free must be true or false, got {is_free!r}", key)
-    bounds = {}
-    for b in ("min", "max"):
-        if b in decl:
-            v = decl[b]
-            if not is_number(v) or math.isnan(float(v)):
-                raise where.error(f"{b} must be a number, got {v!r}", key)
-            bounds[b] = float(v)
-    if "min" in bounds and "max" in bounds and not bounds["min"] < bounds["max"]:
-        raise where.error(f"bounds inverted: min {bounds['min']:g} must be < max {bounds['max']:g}", key)
-    basis = decl.get("basis")
-    if basis is not None:
-        if not spectral:
-            raise where.error("basis is for spectra (alpha_per_nm, rho_g) only", key)
-        if not (basis == "free" or (isinstance(basis, int) and not isinstance(basis, bool) and basis >= 1)):
-            raise where.error(f"basis must be a number of B-spline functions >= 1 or \"free\", got {basis!r}", key)
-    per_sample = decl.get("per_sample", False)
-    if not isinstance(per_sample, bool):
-        raise where.error(f"per_sample must be true or false, got {per_sample!r}", key)
-    smooth = decl.get("smoothness", 0.0)
-    if not is_number(smooth) or smooth < 0:
-        raise where.error(f"smoothness must be a number >= 0, got {smooth!r}", key)
-    extra = [k for k in ("min", "max", "basis", "per_sample", "known", "smoothness") if k in decl]
-    if extra and not is_free:
-        raise where.error(f"{', '.join(extra)} given but free is not true", key)
-    if "known" in decl and spectral:
-        raise where.error("known is for per-sample numbers (thickness_nm, n, k)", key)
-    values, known = _per_sample_values(where, key, decl, plain if isinstance(plain, list) else None)
-    if values is not None:
-        plain = values[0]  # the stack itself holds one value: the first sample's
-    if is_free and free is not None:
-        free.append(FreeDeclaration(path=path, kind=kind, name=f"{key}[{path[1]}]" if path[0] == "layers" else key,
-                                    lower=bounds.get("min"), upper=bounds.get("max"), basis=basis,
-                                    per_sample=per_sample, smoothness=float(smooth),
-                                    where=f"{where.source}: {where.table}", values=values, known=known))
+    if annotations is not None:
+        display = name or (f"{key}[{path[1]}]" if path[0] == "layers" else key)
+        annotations.append(Annotation(path=path, kind=kind, name=display, key=key, where=where, words=words,
+                                      value=listed, spectral=spectral, value_range=value_range))
     return plain
 
 
-def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index: int = 0, free: Optional[list] = None) -> Layer:
+def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index: int = 0, annotations: Optional[list] = None) -> Layer:
     reject_unknown_keys(where, table, _LAYER_KEYS)
     if "thickness_nm" not in table:
         raise where.error("missing (layer thickness in nm)", "thickness_nm")
     table = dict(table)
-    spec = _split_free(where, "thickness_nm", table["thickness_nm"], ("layers", name, "thickness"), "thickness", free,
+    spec = _annotated(where, "thickness_nm", table["thickness_nm"], ("layers", name, "thickness"), "thickness", annotations,
                        spectral=False)
     thickness = read_number(where, "thickness_nm", spec, minimum=0.0, what="nm")
     for key, field, kind in (("n", "n", "n"), ("k", "k", "coefficient")):
-        if key in table and isinstance(table[key], dict) and any(k in table[key] for k in FREE_KEYS):
-            table[key] = _split_free(where, key, table[key], ("layers", name, "index", field), kind, free, spectral=False)
+        if key in table and isinstance(table[key], dict) and any(k in table[key] for k in ("value",) + ANNOTATION_KEYS):
+            table[key] = _annotated(where, key, table[key], ("layers", name, "index", field), kind, annotations, spectral=False)
     if "coherent" not in table:
         raise where.error(
             "missing: say coherent = true for a thin film (interference) or false for a thick layer "
@@ -485,7 +427,7 @@ def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index
     if not isinstance(coherent, bool):
         raise where.error(f"must be true or false, got {coherent!r}", "coherent")
     index = read_material(where, table, base_dir, allow_k=True, label=f"layer {name!r} n",
-                          path=("layers", name, "index"), free=free)
+                          path=("layers", name, "index"), annotations=annotations)
     alpha = None
     if "alpha_per_nm" in table:
         if coherent:
@@ -493,14 +435,14 @@ def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index
                 "is only for incoherent layers (coherent = false); give a coherent film an extinction coefficient k",
                 "alpha_per_nm",
             )
-        spec = _split_free(where, "alpha_per_nm", table["alpha_per_nm"], ("layers", name, "alpha"), "alpha", free,
+        spec = _annotated(where, "alpha_per_nm", table["alpha_per_nm"], ("layers", name, "alpha"), "alpha", annotations,
                            spectral=True)
         alpha = _spectrum(where, "alpha_per_nm", spec, base_dir, "alpha_per_nm",
                           f"layer {name!r} alpha", lo=0.0, hi=None)
     return Layer(index, thickness, coherent=coherent, alpha=alpha, name=name)
 
 
-def _kubelka_munk(source: str, km: Mapping, base_dir: Path, free: Optional[list]) -> KubelkaMunk:
+def _kubelka_munk(source: str, km: Mapping, base_dir: Path, annotations: Optional[list]) -> KubelkaMunk:
     """The ``[kubelka_munk]`` table: a scattering body under the binder of index ``n`` —
     ``K_per_nm``, ``S_per_nm`` (numbers or spectra, 1/nm) or ``[[kubelka_munk.pigments]]`` (each
     with its K, S and a ``concentration``: Duncan's mixture), ``thickness_nm`` (absent: opaque),
@@ -511,12 +453,12 @@ def _kubelka_munk(source: str, km: Mapping, base_dir: Path, free: Optional[list]
     index = read_material(where, km, base_dir, allow_k=False, label="kubelka_munk n")
     thickness = None
     if "thickness_nm" in km:
-        spec = _split_free(where, "thickness_nm", km["thickness_nm"], ("exit", "thickness"), "thickness", free,
+        spec = _annotated(where, "thickness_nm", km["thickness_nm"], ("exit", "thickness"), "thickness", annotations,
                            spectral=False)
         thickness = read_number(where, "thickness_nm", spec, minimum=0.0, what="nm")
     ground = 0.0
     if "ground_reflectance" in km:
-        spec = _split_free(where, "ground_reflectance", km["ground_reflectance"], ("exit", "ground"), "rho_g", free,
+        spec = _annotated(where, "ground_reflectance", km["ground_reflectance"], ("exit", "ground"), "rho_g", annotations,
                            spectral=True)
         ground = _spectrum(where, "ground_reflectance", spec, base_dir, "ground_reflectance",
                            "kubelka_munk ground reflectance", lo=0.0, hi=1.0)
@@ -537,11 +479,9 @@ def _kubelka_munk(source: str, km: Mapping, base_dir: Path, free: Optional[list]
             pigments.append(Paint(*constants(w, t, f"pigment {name!r}"), name=name))
             if "concentration" not in t:
                 raise w.error("missing (the pigment's concentration in the mixture)", "concentration")
-            before = len(free) if free is not None else 0
-            spec = _split_free(w, "concentration", t["concentration"], ("exit", "paint", "concentrations", i),
-                               "thickness", free, spectral=False)  # kind "thickness": bounds [0, inf)
-            if free is not None and len(free) > before:
-                free[-1] = free[-1]._replace(name=f"concentration[{name}]")
+            spec = _annotated(w, "concentration", t["concentration"], ("exit", "paint", "concentrations", i),
+                              "thickness", annotations, spectral=False,  # kind "thickness": a number >= 0
+                              name=f"concentration[{name}]")
             concentrations.append(read_number(w, "concentration", spec, minimum=0.0))
         paint = Mixture(np.asarray(concentrations), pigments)
     else:
@@ -550,15 +490,16 @@ def _kubelka_munk(source: str, km: Mapping, base_dir: Path, free: Optional[list]
 
 
 # ------------------------------------------------------------------------------ stacks
-def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", free: Optional[list] = None) -> Stack:
+def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", annotations: Optional[list] = None) -> Stack:
     """Build a :class:`Stack` from the parsed contents of a stack file (schema: module docstring).
 
     Args:
         d: the dict (as from ``tomllib``).
         base_dir: directory against which relative table file names are resolved.
         source: name used in error messages (the file name when called by :func:`load_stack`).
-        free: if a list, the free-parameter declarations found are appended to it as
-            :class:`FreeDeclaration` records (layers named in their paths).
+        annotations: if a list, each value written with fitting words (:data:`ANNOTATION_KEYS`)
+            is appended to it as an :class:`Annotation` (layers named in their paths), its words
+            unread; without a list the words are skipped.
 
     Units are those of the file: ``thickness_nm`` in nm, ``alpha_per_nm`` in 1/nm, ``rho_g`` a
     fraction in [0, 1]. Numbers stay scalars; tables become :class:`Tabulated` /
@@ -588,7 +529,7 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
         else:
             ambient = Index(1.0)
 
-        layers = [_layer(where, t, base_dir, name, i, free)
+        layers = [_layer(where, t, base_dir, name, i, annotations)
                   for i, (t, name, where) in enumerate(named_tables(source, d.get("layers", []), "layers", "layer"))]
 
         has_sub, has_bg, has_km = "substrate" in d, "background" in d, "kubelka_munk" in d
@@ -599,7 +540,7 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
             raise top.error("missing the exit medium: add a [substrate] (specular) or a [background] (Lambertian) "
                             "table, or a [kubelka_munk] scattering body")
         if has_km:
-            exit_ = _kubelka_munk(source, _table("kubelka_munk"), base_dir, free)
+            exit_ = _kubelka_munk(source, _table("kubelka_munk"), base_dir, annotations)
         elif has_sub:
             where = FileLocation(source, "[substrate]")
             sub = _table("substrate")
@@ -612,11 +553,11 @@ def stack_from_dict(d: Mapping, base_dir=".", *, source: str = "<stack dict>", f
             index = read_material(where, bg, base_dir, allow_k=False, label="background n")
             if "rho_g" not in bg:
                 raise where.error("missing (intrinsic reflectance of the background, in [0, 1])", "rho_g")
-            spec = _split_free(where, "rho_g", bg["rho_g"], ("exit", "reflectance"), "rho_g", free, spectral=True)
+            spec = _annotated(where, "rho_g", bg["rho_g"], ("exit", "reflectance"), "rho_g", annotations, spectral=True)
             rho = _spectrum(where, "rho_g", spec, base_dir, "rho_g", "background rho_g", lo=0.0, hi=1.0)
             exit_ = LambertianBackground(index, rho)
         if "instrument" in d:  # checked here (every loader refuses a bad table); applied by the caller
-            _instrument_settings(source, _table("instrument"), free, [layer.name for layer in layers])
+            _instrument_settings(source, _table("instrument"), annotations, [layer.name for layer in layers])
         return Stack(ambient=ambient, layers=layers, exit=exit_)
     except LayerstackError as e:
         msg = str(e)
@@ -644,7 +585,7 @@ class InstrumentSettings(NamedTuple):
     where: str
 
 
-def _instrument_settings(source: str, table: Mapping, free: Optional[list], layer_names: list) -> InstrumentSettings:
+def _instrument_settings(source: str, table: Mapping, annotations: Optional[list], layer_names: list) -> InstrumentSettings:
     """Read an ``[instrument]`` table: each key a number or a free-parameter table (declared as
     ``("datasets", "all", key)``: one value shared by every dataset whose geometry has the field)."""
     where = FileLocation(source, "[instrument]")
@@ -659,9 +600,9 @@ def _instrument_settings(source: str, table: Mapping, free: Optional[list], laye
                 raise where.error(f"the stack has {len(layer_names)} layer(s), no layer {spec}", key)
             static[key] = spec
             continue
-        if isinstance(spec, dict) and not any(k in spec for k in FREE_KEYS):
+        if isinstance(spec, dict) and not any(k in spec for k in ("value",) + ANNOTATION_KEYS):
             raise where.error(f"a number or {{ value = ..., free = true, min = ..., max = ... }}, got {spec!r}", key)
-        plain = _split_free(where, key, spec, ("datasets", "all", key), "other", free, spectral=False)
+        plain = _annotated(where, key, spec, ("datasets", "all", key), "other", annotations, spectral=False)
         values[key] = read_number(where, key, plain)
     return InstrumentSettings(values, static, f"{source}: [instrument]")
 
@@ -708,18 +649,6 @@ def check_instrument_used(settings: InstrumentSettings, geometries) -> None:
         if key not in fields:
             labels = ", ".join(g.label for g in geometries) or "none"
             raise LayerstackError(f"{settings.where}: {key}: not a field of any geometry asked for ({labels})")
-
-
-def load_fit_stack(path) -> tuple[Stack, list[FreeDeclaration]]:
-    """Read a stack file and its free-parameter declarations (module docstring, "Free
-    parameters"): returns ``(stack, declarations)``, a list of :class:`FreeDeclaration`
-    (:func:`fitting.parameters_from_declarations` makes ``fitting.Parameter`` objects of them). Bounds are in the parameter's file unit (nm for
-    ``thickness_nm``, 1/nm for ``alpha_per_nm``, a fraction in [0, 1] for ``rho_g``); the stack is
-    as from :func:`load_stack` (scalars, or tables of shape ``(table,)``)."""
-    path = Path(path)
-    free: list = []
-    stack = stack_from_dict(read_toml(path), path.parent, source=str(path), free=free)
-    return stack, free
 
 
 def load_stack(path) -> Stack:

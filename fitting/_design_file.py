@@ -403,8 +403,9 @@ def _free_thicknesses(source: str, annotations: list, stack: ls.Stack):
                                   "layer thicknesses only: mark thickness_nm free and give the others plain values")
     names = [layer.name for layer in stack.layers]
     free, lower, upper = [], [], []
-    for _, p in marked:
-        i = names.index(p.path[1])
+    i = -1
+    for _, p in marked:  # in the file's order, one per layer at most: names may repeat (SiO2, TiO2, SiO2 …)
+        i = names.index(p.path[1], i + 1)
         where = FileLocation(source, f"[[layers]] no. {i + 1} ({names[i]!r})")
         lo = 0.0 if p.lower is None else float(p.lower)
         hi = _DEFAULT_MAX_NM if p.upper is None else float(p.upper)

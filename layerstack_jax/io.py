@@ -174,6 +174,8 @@ turns ``"380:780:5"`` (start:stop:step in nm, stop included when on the grid), `
 
 from __future__ import annotations
 
+from ._files.annotations import ANNOTATION_KEYS as ANNOTATION_KEYS
+from ._files.annotations import Annotation as Annotation
 from ._files.file_grammar import FileLocation as FileLocation
 from ._files.file_grammar import check_grid as check_grid
 from ._files.file_grammar import check_range as check_range
@@ -183,6 +185,12 @@ from ._files.file_grammar import read_number as read_number
 from ._files.file_grammar import read_number_list as read_number_list
 from ._files.file_grammar import read_toml as read_toml
 from ._files.file_grammar import reject_unknown_keys as reject_unknown_keys
+from ._files.instrument_file import InstrumentSettings as InstrumentSettings
+from ._files.instrument_file import check_instrument_used as check_instrument_used
+from ._files.instrument_file import instrument_geometry as instrument_geometry
+from ._files.instrument_file import instrument_settings as instrument_settings
+from ._files.instrument_file import load_instrument as load_instrument
+from ._files.material_file import read_material as read_material
 from ._files.measurement import Measurement as Measurement
 from ._files.readers import read_accurion as read_accurion
 from ._files.readers import read_jcamp as read_jcamp
@@ -200,18 +208,10 @@ from ._files.spectra_csv import parse_wavelengths as parse_wavelengths
 from ._files.spectra_csv import read_csv_columns as read_csv_columns
 from ._files.spectra_csv import read_spectra_csv as read_spectra_csv
 from ._files.spectra_csv import save_spectra_csv as save_spectra_csv
-from ._files.stack_file import ANNOTATION_KEYS as ANNOTATION_KEYS
-from ._files.stack_file import Annotation as Annotation
-from ._files.stack_file import InstrumentSettings as InstrumentSettings
-from ._files.stack_file import check_instrument_used as check_instrument_used
-from ._files.stack_file import instrument_geometry as instrument_geometry
-from ._files.stack_file import instrument_settings as instrument_settings
-from ._files.stack_file import load_instrument as load_instrument
 from ._files.stack_file import load_stack as load_stack
-from ._files.stack_file import read_material as read_material
-from ._files.stack_file import save_stack as save_stack
 from ._files.stack_file import stack_from_dict as stack_from_dict
-from ._files.stack_file import stack_to_dict as stack_to_dict
+from ._files.stack_writer import save_stack as save_stack
+from ._files.stack_writer import stack_to_dict as stack_to_dict
 
 __all__ = [
     "load_stack",

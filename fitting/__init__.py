@@ -26,8 +26,11 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
   thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
 * :mod:`fitting._design_file` — design files for ``layerstack design`` (targets, optimizer and
-  robustness tables on top of a stack file; this module owns their format):
-  :func:`load_design`, :func:`run_design`, :func:`design_report`, :func:`plot_design`.
+  robustness tables on top of a stack file; this module owns their format): :func:`load_design`;
+  :mod:`fitting._design_run` runs one: :func:`run_design`, :func:`design_report`,
+  :func:`plot_design`;
+* :mod:`fitting._fit_file` — the fitting words of stack files (``free``, ``min``, ``max`` …):
+  :func:`parameters_from_annotations`, :func:`load_fit_file`.
 
 The fitting words of a stack file (``{ value = ..., free = true, min = ... }``) are read in one
 place, :mod:`fitting._fit_file`: the stack file's reader returns them unread and
@@ -62,13 +65,18 @@ from ._design import optimize_thicknesses as optimize_thicknesses
 from ._design import thickness_yield as thickness_yield
 from ._design import with_thicknesses as with_thicknesses
 from ._design_file import DesignFile as DesignFile
-from ._design_file import DesignOutcome as DesignOutcome
-from ._design_file import design_report as design_report
-from ._design_file import design_stack_dict as design_stack_dict
 from ._design_file import load_design as load_design
-from ._design_file import plot_design as plot_design
-from ._design_file import run_design as run_design
+from ._design_run import DesignOutcome as DesignOutcome
+from ._design_run import design_report as design_report
+from ._design_run import design_stack_dict as design_stack_dict
+from ._design_run import plot_design as plot_design
+from ._design_run import run_design as run_design
 from ._drawdown import drawdown_calibration as drawdown_calibration
+from ._fit_file import FitFile as FitFile
+from ._fit_file import load_fit_file as load_fit_file
+from ._fit_file import load_fit_parameters as load_fit_parameters
+from ._fit_file import parameter_of as parameter_of
+from ._fit_file import parameters_from_annotations as parameters_from_annotations
 from ._objective import Dataset as Dataset
 from ._objective import Objective as Objective
 from ._objective import resample as resample
@@ -78,11 +86,6 @@ from ._parameters import bspline_basis as bspline_basis
 from ._parameters import dispersion as dispersion
 from ._parameters import index_n as index_n
 from ._parameters import instrument as instrument
-from ._fit_file import FitFile as FitFile
-from ._fit_file import load_fit_file as load_fit_file
-from ._fit_file import load_fit_parameters as load_fit_parameters
-from ._fit_file import parameter_of as parameter_of
-from ._fit_file import parameters_from_annotations as parameters_from_annotations
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult

@@ -252,7 +252,7 @@ def test_bad_design_files_exit_2(tmp_path, capsys, design, needles):
 def test_save_stack_round_trip_and_table_paths(tmp_path):
     """io.save_stack writes TOML that load_stack reads back to the same optics; the design
     writer's table-path rebasing keeps a relative table valid from another directory."""
-    from fitting._design_file import _rebase_tables
+    from fitting._design_run import _rebase_tables
     from layerstack_jax.io import save_stack, stack_from_dict, stack_to_dict
 
     examples = Path(__file__).resolve().parent.parent / "examples"

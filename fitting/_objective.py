@@ -35,10 +35,24 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from layerstack_jax import (DEFAULT_NODES, ColourSpace, Geometry, LayerstackError, LayerstackWarning, RealLike, Stack,
-                            TabulatedSpectrum, file_fields, fixed_optics, optics_fixed_at, reflectance, shared_readings)
+from layerstack_jax import (
+    DEFAULT_NODES,
+    ColourSpace,
+    Geometry,
+    LayerstackError,
+    LayerstackWarning,
+    RealLike,
+    Stack,
+    TabulatedSpectrum,
+    file_fields,
+    fixed_optics,
+    optics_fixed_at,
+    reflectance,
+    shared_readings,
+)
 
-from ._parameters import Layout, Parameter, is_instrument_path, resolve_parameter
+from ._layout import Layout, resolve_parameter
+from ._parameters import Parameter, is_instrument_path
 
 __all__ = ["Dataset", "Objective", "resample", "NEGATIVE_READING_FLOOR"]
 

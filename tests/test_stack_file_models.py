@@ -293,7 +293,7 @@ def test_free_fraction_and_sellmeier_term_are_fitted(tmp_path):
 def test_a_parameter_path_may_end_with_an_element_index():
     """``("layers", i, "index", "B", 0)``: one Sellmeier term freed, the others kept; the same
     array freed whole and by element, or an element twice, is refused; a bad index is named."""
-    from fitting._parameters import Layout, resolve_parameter
+    from fitting._layout import Layout, resolve_parameter
 
     stack = _mixed_truth()
     wl = np.linspace(400.0, 800.0, 5)

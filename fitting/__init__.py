@@ -8,7 +8,12 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._objective` — :class:`Dataset` (spectra of one geometry, σ, mask) and
   :class:`Objective` (weighted residuals model − data);
 * :mod:`fitting._solve` — :func:`fit` (optimistix Levenberg–Marquardt by default; Gauss–Newton,
-  Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start);
+  Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start), built from
+  :mod:`fitting._solver_options` (methods, :class:`~fitting._solver_options.SolverOptions`),
+  :mod:`fitting._compiled_fit` (the compiled fit of an objective; its pure parts in
+  :mod:`fitting._fit_functions`, its jit in :mod:`fitting._fit_jit`, the host method in
+  :mod:`fitting._host_fit`, its output record in :mod:`fitting._fit_output`),
+  :mod:`fitting._bound_settling` (fits ended on a bound) and :mod:`fitting._multistart`;
 * :mod:`fitting._statistics` — the one computation of χ², covariance, standard errors,
   correlations and identifiability, used by every fit; :mod:`fitting._bounded` — the one
   L-BFGS-B driver shared by fit and design; :mod:`fitting._status` — result codes and messages;
@@ -83,9 +88,9 @@ from ._parameters import parameters_from_declarations as parameters_from_declara
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult
-from ._solve import HOST_METHODS as HOST_METHODS
-from ._solve import METHODS as METHODS
 from ._solve import fit as fit
+from ._solver_options import HOST_METHODS as HOST_METHODS
+from ._solver_options import METHODS as METHODS
 from ._varnish_removal import VarnishRemoval as VarnishRemoval
 from ._varnish_removal import varnish_removal as varnish_removal
 

@@ -93,7 +93,7 @@ from layerstack_jax import MEMORY_FRACTION, LayerstackError, MemoryBudget, memor
 from ._batch import fit_batch
 from ._objective import Objective
 from ._results import linearised_covariance, structural_degeneracy
-from ._solve import require_compiled_method
+from ._solver_options import require_compiled_method
 
 __all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
            "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
@@ -185,7 +185,8 @@ def _solver_memory(objective: Objective, method: str, chunk_size: int, bands: in
     one ``fit_batch`` then reuses in this process."""
     import inspect
 
-    from ._solve import NEVER, SolverOptions, compiled_fit, starting_point
+    from ._compiled_fit import compiled_fit
+    from ._solver_options import NEVER, SolverOptions, starting_point
 
     opts = {k: p.default for k, p in inspect.signature(fit_batch).parameters.items()
             if k in ("rtol", "atol", "gtol", "max_steps", "sigma_tol")}

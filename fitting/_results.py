@@ -133,7 +133,7 @@ def delta_sign_warnings(objective: Objective, args, chi2: float, dof: int, refit
     model reports). If that fit reaches a χ² at least :data:`SIGN_FLIP_RATIO` times smaller, the
     warning says so. Cost: one extra solve, only for such fits. ``args``: the fit's
     ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom; ``refit(args)``:
-    the χ² the same fit reaches on other data (:func:`fitting._solve.refit_chi2`; None: no check)."""
+    the χ² the same fit reaches on other data (:func:`fitting._compiled_fit.refit_chi2`; None: no check)."""
     from scipy.special import chdtrc  # χ² sf (what scipy.stats.chi2.sf calls; lighter import)
 
     odd = [ds.colour is None and bool(getattr(ds.geometry, "odd_in_delta", False)) for ds in objective.datasets]
@@ -191,9 +191,9 @@ class FitResult:
         model, data, residuals: per dataset ``(samples, wl)``; residuals = model − data,
             NaN at masked points.
         num_steps, converged, reason, result_code: solver outcome (``converged``: the solver
-            met its tolerance; :data:`fitting._solve.STATUS`).
+            met its tolerance; :data:`fitting._status.STATUS`).
         starts, starts_converged, starts_abandoned: multi-start: starts solved, converged, and
-            given up far above the best start (:func:`fitting._solve.give_up_rule`; None for one start).
+            given up far above the best start (:func:`fitting._multistart.give_up_rule`; None for one start).
         singular_values, rank: of the normalised Jacobian; ``non_identifiable``: list of
             ``{"parameters", "direction", "combination"}``.
         sigma_origin: σ behind the standard errors: ``"given"``, ``"estimated from residuals"``
@@ -670,7 +670,7 @@ def _plain_residuals(objective: Objective, model, data) -> list:
 def build_result(objective: Objective, options, out, args, *, scale_covariance, rank_rtol, starts=1,
                  starts_converged=None, note: str = "", stats=None, starts_abandoned=None,
                  correlation_limit: float = CORRELATION_LIMIT, refit: Optional[Callable] = None) -> FitResult:
-    """:class:`FitResult` of one fit from its :class:`~fitting._solve.FitOutput` ``out``
+    """:class:`FitResult` of one fit from its :class:`~fitting._fit_output.FitOutput` ``out``
     (NumPy, no batch axis) and data ``args``; ``stats``: its :class:`~fitting._statistics.FitStatistics`
     when already computed (a row of a batch's), else computed here by the same function;
     ``refit``: the same fit's χ² on other data, for :func:`delta_sign_warnings`."""

@@ -91,9 +91,10 @@ import numpy as np
 from layerstack_jax import MEMORY_FRACTION, LayerstackError, MemoryBudget, memory_budget, open_cube, progress_reporter
 
 from ._batch import fit_batch
+from ._fit_findings import structural_degeneracy
 from ._objective import Objective
-from ._results import linearised_covariance, structural_degeneracy
 from ._solver_options import require_compiled_method
+from ._statistics import linearised_covariance
 
 __all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
            "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
@@ -159,7 +160,7 @@ def cube_parameters(objective: Objective, maps) -> np.ndarray:
 
 def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
     """Rank of the normalised Jacobian of the residuals at the starting values
-    (:func:`fitting._results.linearised_covariance`; compare with the number of free parameters)."""
+    (:func:`fitting._statistics.linearised_covariance`; compare with the number of free parameters)."""
     layout = objective.layout
     x0 = jnp.asarray(layout.x0)
     args = objective.args()

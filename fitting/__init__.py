@@ -26,7 +26,8 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._varnish_removal` — :func:`varnish_removal`: a fitted painting (one fit, a
   batch, a cube's maps) predicted without its varnish or under a fresh one, spectra and sRGB;
 * :mod:`fitting._cube` — :func:`fit_cube`: every pixel of a hyperspectral cube, out of core,
-  resumable, on Dask (local or a cluster), maps written to zarr;
+  resumable, on Dask (local or a cluster), maps written to zarr; its regions sized in
+  :mod:`fitting._cube_regions`, its zarr store and resume markers in :mod:`fitting._cube_store`;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
   thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
@@ -48,9 +49,9 @@ from ._batch import fit_batch as fit_batch
 from ._cube import CUBE_STATUS as CUBE_STATUS
 from ._cube import FIT_MADE as FIT_MADE
 from ._cube import NEGATIVE_SIGMAS as NEGATIVE_SIGMAS
-from ._cube import cube_parameters as cube_parameters
-from ._cube import cube_regions as cube_regions
 from ._cube import fit_cube as fit_cube
+from ._cube_regions import cube_regions as cube_regions
+from ._cube_store import cube_parameters as cube_parameters
 from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult
 from ._design import NeedleScan as NeedleScan

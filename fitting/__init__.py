@@ -5,8 +5,9 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._parameters` — :class:`Parameter` (free leaves of a stack, bounds, spectral
   bases, shared or per sample) and the constructors :func:`thickness`, :func:`alpha`,
   :func:`rho_g`, :func:`index_n`, :func:`dispersion`; :func:`bspline_basis`;
-* :mod:`fitting._objective` — :class:`Dataset` (spectra of one geometry, σ, mask) and
-  :class:`Objective` (weighted residuals model − data);
+* :mod:`fitting._dataset` — :class:`Dataset` (spectra of one geometry, σ, mask), checked and
+  resampled onto the model grid; :mod:`fitting._objective` — :class:`Objective` (weighted
+  residuals model − data);
 * :mod:`fitting._solve` — :func:`fit` (optimistix Levenberg–Marquardt by default; Gauss–Newton,
   Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start), built from
   :mod:`fitting._solver_options` (methods, :class:`~fitting._solver_options.SolverOptions`),
@@ -73,9 +74,9 @@ from ._design_file import load_design as load_design
 from ._design_file import plot_design as plot_design
 from ._design_file import run_design as run_design
 from ._drawdown import drawdown_calibration as drawdown_calibration
-from ._objective import Dataset as Dataset
+from ._dataset import Dataset as Dataset
+from ._dataset import resample as resample
 from ._objective import Objective as Objective
-from ._objective import resample as resample
 from ._parameters import Parameter as Parameter
 from ._parameters import alpha as alpha
 from ._parameters import bspline_basis as bspline_basis

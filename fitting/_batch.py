@@ -30,7 +30,8 @@ import numpy as np
 
 from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background, progress_reporter
 
-from ._objective import Dataset, Objective
+from ._dataset import Dataset
+from ._objective import Objective
 from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter

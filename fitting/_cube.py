@@ -22,7 +22,7 @@ fitting — and writes maps into a zarr store, region by region:
   ``negative_sigmas`` × σ (:data:`NEGATIVE_SIGMAS` = 5 by default: a dark, dark-corrected
   reading scatters around 0, and one below −5σ is not noise — the library's own rule for a
   :class:`~fitting.Dataset`; σ is the dataset's σ of that band, or without σ the library's
-  absolute floor :data:`~fitting._objective.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
+  absolute floor :data:`~fitting._dataset.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
   zero but above that floor are data and are fitted (dropping them would leave the least dark
   pixels of a dark region: its map biased thin). A pixel's bad bands are left out of *its* fit only (weight 0 on those residuals:
   one compiled shape for every pixel; the ``bands_used`` map counts the others, and its degrees
@@ -158,9 +158,9 @@ class _Settings:
 
 def _negative_floor(objective: Objective, k: float) -> np.ndarray:
     """``(wl,)`` the lowest reading kept at each band: −k σ (σ of the dataset's band), or without σ
-    −k/5 × :data:`~fitting._objective.NEGATIVE_READING_FLOOR` (the library's floor is 5 "σ");
+    −k/5 × :data:`~fitting._dataset.NEGATIVE_READING_FLOOR` (the library's floor is 5 "σ");
     computed as the :class:`~fitting.Dataset` check computes −5σ, so that k = 5 is its rule."""
-    from ._objective import NEGATIVE_READING_FLOOR
+    from ._dataset import NEGATIVE_READING_FLOOR
 
     w = np.asarray(objective.args()[1][0], dtype=float).reshape(-1)
     if objective.sigma_given:

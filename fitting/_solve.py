@@ -16,23 +16,23 @@ L-BFGS-B driver (:mod:`fitting._bounded`).
   Single fits and multi-start (one host solve per start); not for :func:`~fitting.fit_batch`.
 
 The unconstrained solvers (``lm``, ``gauss-newton``, ``dogleg``, ``bfgs``) work on transformed
-coordinates that only approach a bound, so their step test could never be met on it. Inside
-their solves a component that comes within 1e-4 of its scale of a finite bound is held exactly
-on that bound (:func:`fitting._fit_functions.hold_on_bounds`, an active set): its derivative is zero there, so the
-solver's own step test ends the solve once the other parameters have converged — a few steps,
-not ``max_steps``. Afterwards (:func:`fitting._bound_settling.settle_on_bounds`) the bound's optimality is checked
-(Karush–Kuhn–Tucker: the gradient presses against the bound): if it holds, the fit is converged
-on the bound and the result says so (:attr:`FitResult.note`); if it does not (the bound was
-reached on the way, or the solver failed there), the fit is finished from that point with
+coordinates that only approach a bound, so their step test could never be met on it. Inside their
+solves a component that comes within 1e-4 of its scale of a finite bound is held exactly on that
+bound (:func:`fitting._fit_functions.hold_on_bounds`, an active set): its derivative is zero there,
+so the solver's own step test ends the solve once the other parameters have converged — a few steps,
+not ``max_steps``. Afterwards (:func:`fitting._bound_settling.settle_on_bounds`) the bound's
+optimality is checked (Karush–Kuhn–Tucker: the gradient presses against the bound): if it holds, the
+fit is converged on the bound and the result says so (:attr:`~fitting.FitResult.note`); if it does not (the
+bound was reached on the way, or the solver failed there), the fit is finished from that point with
 L-BFGS-B, which keeps bounds exactly, and the note says so.
 
-Each objective compiles one solve function (:func:`fitting._compiled_fit.compiled_fit`) per method and options (cached on the objective);
-data travel in ``args``, so later fits with other data and the starts of a multi-start reuse it
-(batched fits compile one vmapped copy). The least-squares methods take the statistics' Jacobian,
-model and residuals from the solver's last evaluation (:func:`fitting._fit_functions.jacobian_with_statistics`): the
-compiled fit holds one copy of the model's Jacobian.
-A fit never raises on non-convergence: the result carries a status (:data:`fitting._status.STATUS`) and the
-reason in the library's words.
+Each objective compiles one solve function (:func:`fitting._compiled_fit.compiled_fit`) per method
+and options (cached on the objective); data travel in ``args``, so later fits with other data and
+the starts of a multi-start reuse it (batched fits compile one vmapped copy). The least-squares
+methods take the statistics' Jacobian, model and residuals from the solver's last evaluation
+(:func:`fitting._fit_functions.jacobian_with_statistics`): the compiled fit holds one copy of the
+model's Jacobian. A fit never raises on non-convergence: the result carries a status
+(:data:`fitting._status.STATUS`) and the reason in the library's words.
 """
 
 from __future__ import annotations

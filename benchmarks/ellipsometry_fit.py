@@ -22,7 +22,7 @@ Timed, in each fresh process (``--processes`` of them; the figures are the best 
   data (``fit(objective, data=...)``: the compiled solver is reused) — min and median over
   ``--repeats``; compile ≈ first fit − median further fit; ``fit(objective, starts=16)`` — 16
   starts solved one after the other by the fit's compiled solver (hopeless starts given up:
-  ``fitting._solve.give_up_rule``), a first and a second call. The XLA compilations of each
+  ``fitting._multistart.give_up_rule``), a first and a second call. The XLA compilations of each
   step are counted from JAX's compile events (``jax.monitoring``).
 * **pyElli**: the same weighted least squares (ψ, Δ residuals / σ, Δ wrapped) over pyElli's
   forward model, minimised by ``scipy.optimize.least_squares(method="lm")`` — MINPACK's
@@ -341,7 +341,7 @@ def markdown(best: dict, runs: list, machine: dict, uptime: str) -> list[str]:
         f"{all(r['all_converged'] for r in runs)}.",
         f"- multi-start: {best['multistart_converged'][0]}/{best['starts']} and {best['multistart_converged'][1]}/"
         f"{best['starts']} starts converged ({best['multistart_abandoned'][0]} and {best['multistart_abandoned'][1]} "
-        "given up far above the best start: `fitting._solve.give_up_rule`); the best start equals the single fit to "
+        "given up far above the best start: `fitting._multistart.give_up_rule`); the best start equals the single fit to "
         f"{max(r['multistart_vs_single_in_stderr'] for r in runs):.1e} standard errors "
         f"({best['multistart_steps'][0]} LM steps, as the single fit: the objective's own start wins).",
         "",

@@ -101,7 +101,7 @@ def s1(repeats: int, dense: bool) -> dict:
     t = time.perf_counter()
     first = ft.fit(obj)
     out["first_fit_s"] = time.perf_counter() - t
-    out["structure"] = repr(ft._solve.structure_for(obj, "auto", "lm"))
+    out["structure"] = repr(ft._fit_functions.structure_for(obj, "auto", "lm"))
     times, lib_x, sp_times, sp_x, nfev, steps = [], [], [], [], [], []
     for _ in range(repeats):
         data = clean + SIGMA * rng.standard_normal(clean.shape)
@@ -182,7 +182,7 @@ def s2(batch: int, repeats: int) -> dict:
     t = time.perf_counter()
     ft.fit(obj)
     out["first_fit_s"] = time.perf_counter() - t
-    out["structure"] = repr(ft._solve.structure_for(obj, "auto", "lm"))
+    out["structure"] = repr(ft._fit_functions.structure_for(obj, "auto", "lm"))
     times = []
     for _ in range(repeats):
         data = [clean + SIGMA * rng.standard_normal(clean.shape), bare + SIGMA * rng.standard_normal(bare.shape)]
@@ -234,11 +234,11 @@ def s3(sizes, dense_up_to: int, repeats: int) -> list:
             row[f"{mode}_median_s"] = float(np.median(ts))
             row[f"{mode}_steps"] = int(r.num_steps)
             # the compiled solve alone (solver and the statistics' Jacobian, no host statistics)
-            from fitting import _solve
+            from fitting import _compiled_fit, _solver_options
 
-            o = _solve.SolverOptions(structure=mode)
-            fn = _solve.compiled_fit(obj, o, batched=False)
-            y0 = np.asarray(_solve.starting_point(obj, o, obj.layout.x0))
+            o = _solver_options.SolverOptions(structure=mode)
+            fn = _compiled_fit.compiled_fit(obj, o, batched=False)
+            y0 = np.asarray(_solver_options.starting_point(obj, o, obj.layout.x0))
             ts = []
             for _ in range(repeats):
                 data = [clean + SIGMA * rng.standard_normal(clean.shape), bare + SIGMA * rng.standard_normal(bare.shape)]

@@ -5,10 +5,16 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._parameters` — :class:`Parameter` (free leaves of a stack, bounds, spectral
   bases, shared or per sample) and the constructors :func:`thickness`, :func:`alpha`,
   :func:`rho_g`, :func:`index_n`, :func:`dispersion`; :func:`bspline_basis`;
-* :mod:`fitting._objective` — :class:`Dataset` (spectra of one geometry, σ, mask) and
-  :class:`Objective` (weighted residuals model − data);
+* :mod:`fitting._dataset` — :class:`Dataset` (spectra of one geometry, σ, mask), checked and
+  resampled onto the model grid; :mod:`fitting._objective` — :class:`Objective` (weighted
+  residuals model − data);
 * :mod:`fitting._solve` — :func:`fit` (optimistix Levenberg–Marquardt by default; Gauss–Newton,
-  Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start);
+  Dogleg, BFGS; jaxopt L-BFGS-B with exact bounds; multi-start), built from
+  :mod:`fitting._solver_options` (methods, :class:`~fitting._solver_options.SolverOptions`),
+  :mod:`fitting._compiled_fit` (the compiled fit of an objective; its pure parts in
+  :mod:`fitting._fit_functions`, its jit in :mod:`fitting._fit_jit`, the host method in
+  :mod:`fitting._host_fit`, its output record in :mod:`fitting._fit_output`),
+  :mod:`fitting._bound_settling` (fits ended on a bound) and :mod:`fitting._multistart`;
 * :mod:`fitting._statistics` — the one computation of χ², covariance, standard errors,
   correlations and identifiability, used by every fit; :mod:`fitting._bounded` — the one
   L-BFGS-B driver shared by fit and design; :mod:`fitting._status` — result codes and messages;
@@ -21,7 +27,8 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
 * :mod:`fitting._varnish_removal` — :func:`varnish_removal`: a fitted painting (one fit, a
   batch, a cube's maps) predicted without its varnish or under a fresh one, spectra and sRGB;
 * :mod:`fitting._cube` — :func:`fit_cube`: every pixel of a hyperspectral cube, out of core,
-  resumable, on Dask (local or a cluster), maps written to zarr;
+  resumable, on Dask (local or a cluster), maps written to zarr; its regions sized in
+  :mod:`fitting._cube_regions`, its zarr store and resume markers in :mod:`fitting._cube_store`;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
   :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
   thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
@@ -48,9 +55,11 @@ from ._batch import fit_batch as fit_batch
 from ._cube import CUBE_STATUS as CUBE_STATUS
 from ._cube import FIT_MADE as FIT_MADE
 from ._cube import NEGATIVE_SIGMAS as NEGATIVE_SIGMAS
-from ._cube import cube_parameters as cube_parameters
-from ._cube import cube_regions as cube_regions
 from ._cube import fit_cube as fit_cube
+from ._cube_regions import cube_regions as cube_regions
+from ._cube_store import cube_parameters as cube_parameters
+from ._dataset import Dataset as Dataset
+from ._dataset import resample as resample
 from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult
 from ._design import NeedleScan as NeedleScan
@@ -77,9 +86,7 @@ from ._fit_file import load_fit_file as load_fit_file
 from ._fit_file import load_fit_parameters as load_fit_parameters
 from ._fit_file import parameter_of as parameter_of
 from ._fit_file import parameters_from_annotations as parameters_from_annotations
-from ._objective import Dataset as Dataset
 from ._objective import Objective as Objective
-from ._objective import resample as resample
 from ._parameters import Parameter as Parameter
 from ._parameters import alpha as alpha
 from ._parameters import bspline_basis as bspline_basis
@@ -89,9 +96,9 @@ from ._parameters import instrument as instrument
 from ._parameters import rho_g as rho_g
 from ._parameters import thickness as thickness
 from ._results import FitResult as FitResult
-from ._solve import HOST_METHODS as HOST_METHODS
-from ._solve import METHODS as METHODS
 from ._solve import fit as fit
+from ._solver_options import HOST_METHODS as HOST_METHODS
+from ._solver_options import METHODS as METHODS
 from ._varnish_removal import VarnishRemoval as VarnishRemoval
 from ._varnish_removal import varnish_removal as varnish_removal
 

@@ -2,7 +2,7 @@ r"""Many independent fits at once, and the joint calibration-series fit.
 
 :func:`fit_batch` fits N independent data sets with the same :class:`~fitting.Objective`
 (same model, parameters and starting values; only the data differ) in one compiled solve
-(each fit by the single fit's program, :data:`fitting._solve.BLOCK`), N processed in chunks of
+(each fit by the single fit's program, :data:`fitting._compiled_fit.BLOCK`), N processed in chunks of
 ``chunk_size`` (bounded memory; the last chunk is padded so that one compiled shape serves
 all). Every fit keeps its own convergence status: a failed fit does not fail the batch, and a
 batch that cannot finish says so (:func:`fitting._watchdog.wait_for`) instead of waiting.
@@ -30,13 +30,16 @@ import numpy as np
 
 from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background, progress_reporter
 
-from ._objective import Dataset, Objective
+from ._dataset import Dataset
+from ._objective import Objective
 from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._solve import (BY_LBFGSB, RESTARTED, SolverOptions, bound_note, compiled_fit, multistart_points,
-                     refit_chi2, require_compiled_method, settle_on_bounds, starting_point)
+from ._bound_settling import BY_LBFGSB, RESTARTED, bound_note, settle_on_bounds
+from ._compiled_fit import compiled_fit, refit_chi2
+from ._multistart import multistart_points
+from ._solver_options import SolverOptions, require_compiled_method, starting_point
 from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
                           fit_statistics, separability_summary)
 from ._status import CONVERGED, INVALID_DATA, result_message
@@ -64,7 +67,7 @@ class BatchResult:
             unconstrained method settled on an optimal bound; restarted: ``(N,)`` fits it ended
             on a bound that is not optimal, restarted from there; finished_with_lbfgsb: ``(N,)``
             fits that ended on such a bound again, finished by L-BFGS-B
-            (:func:`fitting._solve.settle_on_bounds`);
+            (:func:`fitting._bound_settling.settle_on_bounds`);
         invalid_data: ``{row: message}`` of the fits not made (their data failed the checks);
         separability: per fit, the groups of parameters correlated beyond 0.99 with the
             combination the data determine (:func:`fitting._statistics.separability_findings`;
@@ -184,7 +187,7 @@ class LookupTable:
     """Model spectra of an objective at ``size`` points of its parameter box, for starting each of
     many fits near its own optimum (``fit_batch(..., start="lookup")``).
 
-    The points are those of a multi-start (:func:`fitting._solve.multistart_points`: the
+    The points are those of a multi-start (:func:`fitting._multistart.multistart_points`: the
     objective's start, then draws uniform between finite bounds and log-uniform within a factor
     10 of the start where one side is open); their spectra are computed once, by one compiled
     ``lax.map``, and do not depend on the data. :meth:`nearest` gives, for each fit, the point

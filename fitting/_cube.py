@@ -22,7 +22,7 @@ fitting — and writes maps into a zarr store, region by region:
   ``negative_sigmas`` × σ (:data:`NEGATIVE_SIGMAS` = 5 by default: a dark, dark-corrected
   reading scatters around 0, and one below −5σ is not noise — the library's own rule for a
   :class:`~fitting.Dataset`; σ is the dataset's σ of that band, or without σ the library's
-  absolute floor :data:`~fitting._objective.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
+  absolute floor :data:`~fitting._dataset.NEGATIVE_READING_FLOOR` taken as 5σ). Readings below
   zero but above that floor are data and are fitted (dropping them would leave the least dark
   pixels of a dark region: its map biased thin). A pixel's bad bands are left out of *its* fit only (weight 0 on those residuals:
   one compiled shape for every pixel; the ``bands_used`` map counts the others, and its degrees
@@ -60,7 +60,7 @@ fitting — and writes maps into a zarr store, region by region:
   the worker processes that run a region).
 * progress: pixels done, rate and ETA on a tqdm bar and in the ``fitting.cube`` logger.
 * ``chunk="auto"`` (the default) sizes the regions from the memory of where they run
-  (:func:`auto_region`): the budget is half (:data:`layerstack_jax.MEMORY_FRACTION`)
+  (:func:`fitting._cube_regions.auto_region`): the budget is half (:data:`layerstack_jax.MEMORY_FRACTION`)
   of the smallest Dask worker's ``memory_limit`` per thread (``Client.scheduler_info()``), or of
   this process's available memory (:func:`layerstack_jax.memory_budget`) without a
   cluster; the solver's memory is measured on the compiled solver for ``chunk_size`` fits (the
@@ -74,11 +74,9 @@ fitting — and writes maps into a zarr store, region by region:
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import os
-import re
 import time
 import warnings
 from pathlib import Path
@@ -88,18 +86,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import MEMORY_FRACTION, LayerstackError, MemoryBudget, memory_budget, open_cube, progress_reporter
+from layerstack_jax import LayerstackError, open_cube, progress_reporter
 
 from ._batch import fit_batch
+from ._cube_regions import _budget_and_slots, auto_region, cube_regions
+from ._cube_store import _empty_maps, _fingerprint, _init_store, _mark_done, _marker, _var, _write_region
+from ._fit_findings import structural_degeneracy
 from ._objective import Objective
-from ._results import linearised_covariance, structural_degeneracy
-from ._solve import require_compiled_method
+from ._solver_options import require_compiled_method
+from ._statistics import linearised_covariance
 
 __all__ = ["fit_cube", "CUBE_STATUS", "FIT_MADE", "NEGATIVE_SIGMAS", "CHI2_CENTRAL", "status_counts",
-           "structural_degeneracy", "rank_at_start", "cube_regions", "auto_region",
-           "AUTO_REGION_MAX", "AUTO_REGIONS_PER_WORKER", "cube_parameters"]
+           "rank_at_start"]
 
 log = logging.getLogger("fitting.cube")
+
 
 #: ``status`` codes of the pixel maps of :func:`fit_cube` (dimensionless integers). 2, 3, 4:
 #: not fitted, too few usable bands (the most frequent reason named); 5, 6, 7: fitted, values
@@ -124,42 +125,10 @@ NEGATIVE_SIGMAS = 5.0
 #: distribution marks it "implausible chi2" (status 5).
 CHI2_CENTRAL = 0.999
 
-_MARKERS = ".regions"  # suffix of the marker directory beside the store
-
-#: Largest ``chunk="auto"`` region, rows × columns pixels (a strip of the same area may be
-#: chosen on a narrow image): a lost region is cheap to redo.
-AUTO_REGION_MAX = (64, 64)
-#: ``chunk="auto"`` cuts at least this many regions per worker thread when the cube is large
-#: enough (regions of at least ``chunk_size`` pixels): every worker is fed, and the last regions
-#: do not leave the others idle for long.
-AUTO_REGIONS_PER_WORKER = 4
-_SAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
-
-
-def _var(name: str) -> str:
-    """A zarr-safe variable name for a parameter component (``varnish.alpha[3]`` → ``varnish.alpha_3``)."""
-    return _SAFE.sub("_", name).strip("_") or "parameter"
-
-
-def cube_parameters(objective: Objective, maps) -> np.ndarray:
-    """The fitted parameter vectors of a cube, ``(y, x, P)`` in the order of
-    ``objective.layout.names``, from the maps :func:`fit_cube` wrote (an ``xarray.Dataset``, or
-    the path of its zarr store); NaN where no fit was made."""
-    if not hasattr(maps, "data_vars"):
-        import xarray as xr
-
-        maps = xr.open_zarr(maps)
-    names = [_var(n) for n in objective.layout.names]
-    missing = [n for n in names if n not in maps.data_vars]
-    if missing:
-        raise LayerstackError(f"cube_parameters: the maps lack {', '.join(missing)}: were they written by fit_cube "
-                              "for this objective?")
-    return np.stack([np.asarray(maps[n].values, float) for n in names], axis=-1)
-
 
 def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
     """Rank of the normalised Jacobian of the residuals at the starting values
-    (:func:`fitting._results.linearised_covariance`; compare with the number of free parameters)."""
+    (:func:`fitting._statistics.linearised_covariance`; compare with the number of free parameters)."""
     layout = objective.layout
     x0 = jnp.asarray(layout.x0)
     args = objective.args()
@@ -169,136 +138,6 @@ def rank_at_start(objective: Objective, *, rank_rtol: float = 1e-8) -> int:
     J = jac(x0, args, objective.optics)
     J = np.asarray(J) * layout.scale[None, :]
     return int(linearised_covariance(J, np.asarray(x0), layout.scale, rank_rtol)[2])
-
-
-def cube_regions(shape: tuple, chunk: tuple) -> list:
-    """Regions ``(iy, ix, ys, xs)`` of a ``(ny, nx)`` image cut in ``chunk`` = (rows, cols) tiles."""
-    ny, nx = shape
-    ty, tx = chunk
-    return [(iy, ix, slice(iy * ty, min((iy + 1) * ty, ny)), slice(ix * tx, min((ix + 1) * tx, nx)))
-            for iy in range(-(-ny // ty)) for ix in range(-(-nx // tx))]
-
-
-def _solver_memory(objective: Objective, method: str, chunk_size: int, bands: int, fit_opts: tuple) -> tuple:
-    """``(temp, argument, output)`` bytes of the compiled solver of :func:`~fitting.fit_batch`
-    for one call of ``chunk_size`` fits (``compiled.memory_analysis()``); the compilation is the
-    one ``fit_batch`` then reuses in this process."""
-    import inspect
-
-    from ._solve import NEVER, SolverOptions, compiled_fit, starting_point
-
-    opts = {k: p.default for k, p in inspect.signature(fit_batch).parameters.items()
-            if k in ("rtol", "atol", "gtol", "max_steps", "sigma_tol")}
-    opts.update((k, v) for k, v in fit_opts if k in opts)
-    o = SolverOptions(method, opts["rtol"], opts["atol"], opts["gtol"], opts["max_steps"], opts["sigma_tol"])
-    args, _ = objective.batch_args([np.zeros((chunk_size, bands))])
-    y0 = jnp.asarray(starting_point(objective, o, objective.layout.x0))
-    y0 = jnp.broadcast_to(y0, (chunk_size,) + y0.shape)
-    m = compiled_fit(objective, o, batched=True).lower(y0, args, objective.optics, NEVER).compile().memory_analysis()
-    if m is None:  # pragma: no cover - a backend without memory analysis
-        raise LayerstackError("fit_cube: chunk='auto' needs the compiled solver's memory analysis, which this JAX "
-                              "backend does not give: give chunk=(rows, columns)")
-    return int(m.temp_size_in_bytes), int(m.argument_size_in_bytes), int(m.output_size_in_bytes)
-
-
-def _solver_calls(rows: int, cols: int, ny: int, nx: int, chunk_size: int) -> tuple:
-    """``(solver calls, regions)`` of an ``(ny, nx)`` image cut in ``rows x cols`` tiles, every
-    pixel fitted (each region's pixels padded to a multiple of ``chunk_size``)."""
-    r_sizes = [(rows, ny // rows)] + ([(ny % rows, 1)] if ny % rows else [])
-    c_sizes = [(cols, nx // cols)] + ([(nx % cols, 1)] if nx % cols else [])
-    calls = sum(-(-(r * c) // chunk_size) * nr * nc for r, nr in r_sizes for c, nc in c_sizes)
-    return calls, sum(n for _, n in r_sizes) * sum(n for _, n in c_sizes)
-
-
-def _region_shape(pixels: int, ny: int, nx: int, chunk_size: int) -> tuple:
-    """``(rows, columns)`` of the regions of at most ``pixels`` pixels that cut an ``(ny, nx)``
-    image into the fewest solver calls of ``chunk_size`` fits (the least padding); among those,
-    within 5 % of the fewest regions, the squarest (then the widest)."""
-    pixels = max(int(pixels), 1)
-    found = []
-    for rows in range(1, min(ny, pixels) + 1):
-        cols = min(nx, pixels // rows)
-        found.append((*_solver_calls(rows, cols, ny, nx, chunk_size), rows, cols))
-    calls = min(f[0] for f in found)
-    found = [f for f in found if f[0] == calls]
-    regions = min(f[1] for f in found)
-    found = [f for f in found if f[1] <= 1.05 * regions]
-    _, _, rows, cols = min(found, key=lambda f: (abs(f[2] - f[3]), f[1], -f[3]))
-    return rows, cols
-
-
-def _budget_and_slots(c, memory: Optional[int]):
-    """``(MemoryBudget, worker threads)`` of where the regions run: this process (``c`` None),
-    or the smallest ``memory_limit`` per thread of the cluster's workers (public
-    ``Client.scheduler_info()``; this process's memory where the workers state no limit)."""
-    slots, budget = 1, None
-    if c is not None:
-        try:
-            info = c.scheduler_info(n_workers=-1)  # every worker (newer distributed shows 5 by default)
-        except TypeError:  # pragma: no cover - distributed before n_workers=
-            info = c.scheduler_info()
-        workers = info.get("workers", {})
-        slots = max(sum(int(w.get("nthreads", 1) or 1) for w in workers.values()), 1)
-        per_thread = [(int(w["memory_limit"]) // max(int(w.get("nthreads", 1) or 1), 1), int(w["memory_limit"]),
-                       int(w.get("nthreads", 1) or 1)) for w in workers.values() if w.get("memory_limit")]
-        if per_thread:
-            share, limit, threads = min(per_thread)
-            f = MEMORY_FRACTION
-            budget = MemoryBudget(int(share * f), share, f,
-                                           f"smallest Dask worker memory_limit {limit / 1e6:.4g} MB / {threads} "
-                                           f"thread(s), {len(workers)} worker(s)")
-    if memory is not None:
-        budget = MemoryBudget(int(memory), int(memory), 1.0, "given (memory=)")
-    if budget is None:
-        budget = memory_budget()
-        if c is not None:
-            budget = budget._replace(source=budget.source + " of this process (the workers state no memory limit)")
-    return budget, slots
-
-
-def auto_region(objective: Objective, shape: tuple, bands: int, itemsize: int, *, chunk_size: int = 128,
-                method: str = "lm", fit_options: tuple = (), budget=None, slots: int = 1) -> tuple:
-    """The ``chunk="auto"`` region ``(rows, columns)`` of :func:`fit_cube` and how it was sized.
-
-    A region of ``p`` pixels needs (bytes)::
-
-        p * per_pixel + solver
-        per_pixel = bands * (itemsize + 16)          # the block as read, its float64 copy, the spectra fitted
-                  + 2 * (A + O) / chunk_size         # fit_batch's data and results of every fit on the host
-                  + 2 * maps                         # one pixel of every map, and its copy written to zarr
-        solver    = T + A + O                        # one call of the compiled solver (chunk_size fits)
-
-    ``T``, ``A``, ``O``: the temp, argument and output bytes of the compiled solver for
-    ``chunk_size`` fits (``compiled.memory_analysis()``, measured); ``maps``: the bytes of one
-    pixel of all the maps. ``p`` is the largest that fits ``budget`` (a
-    :class:`layerstack_jax.MemoryBudget`; default: :func:`~layerstack_jax.memory_budget`),
-    at most :data:`AUTO_REGION_MAX` (in pixels) and at most
-    ``⌈pixels / (AUTO_REGIONS_PER_WORKER × slots)⌉`` (but not below ``chunk_size``: a smaller
-    region would pad one solver call); then shaped by :func:`_region_shape` (the fewest padded
-    solver calls over the image). Raises :class:`LayerstackError` naming ``chunk`` when not even a region
-    of ``chunk_size`` pixels fits.
-
-    Returns ``((rows, columns), sizing)``, ``sizing`` a dict of the numbers used (bytes).
-    """
-    ny, nx = shape
-    budget = memory_budget() if budget is None else budget
-    temp, args, outs = _solver_memory(objective, method, chunk_size, bands, tuple(fit_options))
-    maps = sum(v.itemsize for v in _empty_maps((1, 1), tuple(objective.layout.names)).values())
-    per_pixel = bands * (itemsize + 16) + 2 * (args + outs) / chunk_size + 2 * maps
-    solver = temp + args + outs
-    least = solver + chunk_size * per_pixel
-    if budget.bytes < least:
-        raise LayerstackError(
-            f"fit_cube: chunk: the worker memory {budget.describe()} cannot hold one region of chunk_size="
-            f"{chunk_size} pixels, {least / 1e6:.4g} MB (the compiled solver {solver / 1e6:.4g} MB and "
-            f"{per_pixel / 1e3:.4g} kB per pixel): lower chunk_size, or give the workers more memory")
-    fits = int((budget.bytes - solver) // per_pixel)
-    feed = max(chunk_size, -(-ny * nx // (AUTO_REGIONS_PER_WORKER * max(int(slots), 1))))
-    pixels = min(fits, AUTO_REGION_MAX[0] * AUTO_REGION_MAX[1], feed)
-    region = _region_shape(min(pixels, ny * nx), ny, nx, chunk_size)
-    sizing = {"budget_bytes": int(budget.bytes), "budget_source": budget.describe(), "per_pixel_bytes": per_pixel,
-              "solver_bytes": solver, "solver_temp_bytes": temp, "memory_fit_pixels": fits, "worker_threads": slots}
-    return region, sizing
 
 
 @dataclasses.dataclass(frozen=True)
@@ -319,9 +158,9 @@ class _Settings:
 
 def _negative_floor(objective: Objective, k: float) -> np.ndarray:
     """``(wl,)`` the lowest reading kept at each band: −k σ (σ of the dataset's band), or without σ
-    −k/5 × :data:`~fitting._objective.NEGATIVE_READING_FLOOR` (the library's floor is 5 "σ");
+    −k/5 × :data:`~fitting._dataset.NEGATIVE_READING_FLOOR` (the library's floor is 5 "σ");
     computed as the :class:`~fitting.Dataset` check computes −5σ, so that k = 5 is its rule."""
-    from ._objective import NEGATIVE_READING_FLOOR
+    from ._dataset import NEGATIVE_READING_FLOOR
 
     w = np.asarray(objective.args()[1][0], dtype=float).reshape(-1)
     if objective.sigma_given:
@@ -350,20 +189,6 @@ def _pixel_status(block: np.ndarray, user_mask: Optional[np.ndarray], s: _Settin
     if user_mask is not None:
         status[~user_mask] = 1
     return status, bad
-
-
-def _empty_maps(shape: tuple, names: tuple) -> dict:
-    maps = {}
-    for n in names:
-        maps[_var(n)] = np.full(shape, np.nan)
-        maps[_var(n) + "_stderr"] = np.full(shape, np.nan)
-    for n in ("chi2", "reduced_chi2"):
-        maps[n] = np.full(shape, np.nan)
-    for n, dt in (("num_steps", np.int32), ("result_code", np.int16), ("rank", np.int16), ("converged", np.int8),
-                  ("identifiable", np.int8), ("bands_used", np.int16)):
-        maps[n] = np.full(shape, -1, dt)
-    maps["status"] = np.full(shape, -1, np.int8)
-    return maps
 
 
 def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: slice, xs: slice, s: _Settings):
@@ -429,65 +254,6 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
             "seconds": time.perf_counter() - t0}
 
 
-def _write_region(out: str, maps: dict, ys: slice, xs: slice) -> None:
-    import xarray as xr
-
-    ds = xr.Dataset({k: (("y", "x"), v) for k, v in maps.items()})
-    ds.to_zarr(out, region={"y": ys, "x": xs}, consolidated=False)
-
-
-def _marker_dir(out: str) -> Path:
-    return Path(str(out).rstrip("/") + _MARKERS)
-
-
-def _marker(out: str, iy: int, ix: int) -> Path:
-    return _marker_dir(out) / f"{iy}_{ix}"
-
-
-def _mark_done(out: str, iy: int, ix: int) -> None:
-    path = _marker(out, iy, ix)
-    path.parent.mkdir(exist_ok=True)
-    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-    tmp.write_text("done\n")
-    os.replace(tmp, path)  # atomic: a marker exists only once its region is fully written
-
-
-def _fingerprint(objective: Objective, cube, chunk: tuple, method: str, chunk_size: int, saturation, mask,
-                 fit_options: tuple) -> str:
-    """Identity of a job (objective, cube geometry, settings): a store is resumed only by the same job."""
-    h = hashlib.sha1()
-    lay = objective.layout
-    for part in (lay.names, np.asarray(lay.x0), np.asarray(lay.lower), np.asarray(lay.upper),
-                 np.asarray(objective.wavelength), np.asarray(cube["wavelength"].values), cube.shape, chunk, method,
-                 chunk_size, saturation, fit_options,
-                 [np.asarray(w) for w in objective.args()[1]]):
-        h.update(repr(part).encode() if not isinstance(part, np.ndarray) else part.tobytes())
-    if mask is not None:
-        h.update(np.packbits(np.asarray(mask, bool)).tobytes())
-    return h.hexdigest()
-
-
-def _init_store(out: str, cube, names: tuple, chunk: tuple, attrs: dict) -> None:
-    """Create the zarr store: every map at its 'not fitted yet' value, chunked like the regions."""
-    import dask.array as da
-    import xarray as xr
-
-    ny, nx = cube.sizes["y"], cube.sizes["x"]
-    template = _empty_maps((1, 1), names)
-    ds = xr.Dataset(
-        {k: (("y", "x"), da.full((ny, nx), v.reshape(-1)[0], dtype=v.dtype, chunks=chunk)) for k, v in template.items()},
-        coords={"y": cube["y"].values, "x": cube["x"].values},
-        attrs=attrs,
-    )
-    encoding = {k: {"chunks": chunk} for k in template}
-    markers = _marker_dir(out)
-    if markers.exists():  # markers of an earlier job in this place: they no longer describe the store
-        for m in markers.iterdir():
-            m.unlink()
-    ds.to_zarr(out, mode="w", encoding=encoding, consolidated=False)
-    markers.mkdir(exist_ok=True)
-
-
 def _check_objective(objective: Objective, cube) -> Optional[np.ndarray]:
     """The objective must be a one-dataset, one-sample spectral fit on the cube's bands.
     Returns the boolean band mask the dataset uses (None: all)."""
@@ -547,7 +313,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         out: path of the zarr store written (created, or resumed).
         mask: optional boolean ``(y, x)``, True where pixels are to be fitted.
         chunk: region size (rows, columns) in pixels: the unit of work, of writing and of
-            resuming; or ``"auto"`` (default): sized from the workers' memory (:func:`auto_region`),
+            resuming; or ``"auto"`` (default): sized from the workers' memory (:func:`fitting._cube_regions.auto_region`),
             or, resuming a store, the store's own region size.
         saturation: a reading >= this is a bad band of its pixel (left out of its fit).
         negative_sigmas: k, readings below zero are kept down to −k σ (σ of the dataset's band;
@@ -563,7 +329,7 @@ def fit_cube(objective: Objective, cube, *, out: Union[str, os.PathLike], mask=N
         progress: True for a progress bar, or a callable ``f(pixels_done, pixels_total)``.
         allow_degenerate: fit even an objective degenerate by construction (warned once).
         memory: bytes one region may fill for ``chunk="auto"`` (default: measured where the
-            regions run: :func:`_budget_and_slots`).
+            regions run: :func:`fitting._cube_regions._budget_and_slots`).
 
     Returns:
         :class:`xarray.Dataset` (lazy, opened from ``out``): maps ``(y, x)`` of every free

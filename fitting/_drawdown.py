@@ -35,7 +35,8 @@ import numpy as np
 
 from layerstack_jax import Geometry, KubelkaMunk, LayerstackError, Mixture, Paint, Stack, k_over_s
 
-from ._objective import Dataset, Objective
+from ._dataset import Dataset
+from ._objective import Objective
 from ._parameters import Parameter
 
 __all__ = ["drawdown_calibration"]

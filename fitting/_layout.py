@@ -472,7 +472,7 @@ class Layout:
     def to_unconstrained(self, x) -> np.ndarray:
         """Inverse of :meth:`to_physical` (numpy); values on a bound are nudged inside by
         1e-3 of the range or scale — beyond the 1e-4 within which a solve holds a component on
-        its bound (:func:`fitting._solve.hold_on_bounds`), so a start on a bound may leave it."""
+        its bound (:func:`fitting._fit_functions.hold_on_bounds`), so a start on a bound may leave it."""
         x = np.asarray(x, dtype=float)
         u = np.zeros_like(x)
         lo, hi, s = self.lower, self.upper, self.scale

@@ -4,7 +4,7 @@ rejected step from round-off, :class:`RoundoffTrustRegion`), Gauss–Newton and 
 library's stopping rule (:func:`near_minimum`: the solve ends within ``sigma_tol`` standard
 errors of its minimum, :func:`gauss_newton_distance`), the choice among them for a fit's options
 (:func:`optx_solver`) and the library's status of an optimistix result (:func:`solver_status`).
-:mod:`fitting._solve` drives them.
+:mod:`fitting._compiled_fit` drives them.
 """
 
 from __future__ import annotations

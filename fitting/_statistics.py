@@ -214,7 +214,7 @@ def bound_contacts(x, lower, upper, scale, rtol: float = 1e-6, xp=np):
     """``(at_lower, at_upper)``, each ``(..., P)`` bool: components within ``rtol`` × scale of
     a finite bound (L-BFGS-B and TRF end exactly on a bound; the transforms of the
     unconstrained solvers approach it exponentially, and their solves hold a component in
-    contact on its bound, :func:`fitting._solve.hold_on_bounds`). ``xp``: ``numpy`` (host) or
+    contact on its bound, :func:`fitting._fit_functions.hold_on_bounds`). ``xp``: ``numpy`` (host) or
     ``jax.numpy`` (inside a compiled solve)."""
     x = np.asarray(x, float) if xp is np else x
     tol = rtol * np.asarray(scale, float)

@@ -14,7 +14,7 @@ STATUS = {
     FAILED: "failed: the solver could not make progress (singular or diverging linearised problem)",
     INVALID_DATA: "not fitted: invalid data (see the batch's invalid_data)",
     ABANDONED: ("not converged: a multi-start start given up — after the give-up step count its cost was still far "
-                "above that of the best start converged before it (fitting._solve.give_up_rule)"),
+                "above that of the best start converged before it (fitting._multistart.give_up_rule)"),
 }
 
 

@@ -386,7 +386,7 @@ class StructuredDampedNewtonDescent(optx.AbstractDescent):
 
 
 def block_distance(descent_state, structure: Structure):
-    r"""``d²`` of :func:`fitting._solve.gauss_newton_distance` from a
+    r"""``d²`` of :func:`fitting._least_squares.gauss_newton_distance` from a
     :class:`StructuredDampedNewtonDescent` state: :math:`g^\top (J^\top J)^{+} g = \|P_J r\|^2`
     by the block QR, with directions of eigenvalue below 1e-12 of the largest column norm²
     damped away (as the dense rule leaves them out)."""
@@ -403,7 +403,7 @@ def with_args_tangent(out, of_args: Callable, args, dargs):
     """``out`` plus the exact JVP of ``of_args`` at ``args`` along ``dargs`` (symbolic zeros
     among them made concrete), or ``out`` itself when every tangent of ``args`` is a symbolic
     zero (always, in the solvers): the ``args`` part of the custom JVPs of
-    :func:`fitting._solve.jacobian_with_statistics`, :func:`fitting._solve.dense_jacobian` and
+    :func:`fitting._fit_functions.jacobian_with_statistics`, :func:`fitting._fit_functions.dense_jacobian` and
     :func:`structured_jacobian_with_statistics`."""
     is_zero = lambda t: isinstance(t, SymbolicZero)  # noqa: E731
     if all(is_zero(t) for t in jax.tree.leaves(dargs, is_leaf=is_zero)):
@@ -419,7 +419,7 @@ def residuals_with_jacobian(residuals_and_parts, z_of, traced_once, jacobian: Ca
     applies it, ``apply(J, dz)``, instead of differentiating the model again. Linearising ``fn``
     (``jax.linearize``, the solvers) thus costs one Jacobian; tangents of ``args`` (never used by
     the solvers) are propagated exactly by :func:`with_args_tangent`. The dense form
-    (:func:`fitting._solve.jacobian_with_statistics`: ``jax.jacfwd``, ``J @ dz``) and the
+    (:func:`fitting._fit_functions.jacobian_with_statistics`: ``jax.jacfwd``, ``J @ dz``) and the
     compressed one (:func:`structured_jacobian_with_statistics`) differ only in the two callables."""
 
     def evaluate(u, args_optics):
@@ -451,7 +451,7 @@ def residuals_with_jacobian(residuals_and_parts, z_of, traced_once, jacobian: Ca
 
 
 def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_parts, z_of, traced_once):
-    r""":func:`fitting._solve.jacobian_with_statistics` with the Jacobian formed in compressed
+    r""":func:`fitting._fit_functions.jacobian_with_statistics` with the Jacobian formed in compressed
     form (``g + b`` tangents, :func:`_compressed_jacobian`) and applied by
     :func:`apply_compressed` in the JVP rule: ``fn(u, (args, optics)) -> (r, ((model,
     residuals, penalty), CompressedJacobian))``."""
@@ -466,7 +466,7 @@ def structured_jacobian_with_statistics(objective, st: Structure, residuals_and_
 
 
 def structured_statistics_function(objective, st: Structure, residuals_and_parts):
-    """:func:`fitting._solve._statistics_function` with the Jacobian in compressed form:
+    """:func:`fitting._fit_functions._statistics_function` with the Jacobian in compressed form:
     ``(x, args, optics) -> (model, residuals, penalty, CompressedJacobian)``."""
     scale = jnp.asarray(objective.layout.scale)
     seeds = jnp.asarray(st.seeds)

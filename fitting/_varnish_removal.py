@@ -23,7 +23,7 @@ import numpy as np
 
 from layerstack_jax import ColourSpace, Geometry, Layer, LayerstackError, Stack, reflectance
 
-from ._cube import cube_parameters
+from ._cube_store import cube_parameters
 from ._objective import Objective
 
 __all__ = ["VarnishRemoval", "varnish_removal", "cube_parameters"]

@@ -88,7 +88,8 @@ pytest.importorskip("xarray")
 pytest.importorskip("zarr")
 pytest.importorskip("dask")
 
-from fitting._cube import AUTO_REGION_MAX, _solver_memory, auto_region, fit_cube  # noqa: E402
+from fitting._cube import fit_cube  # noqa: E402
+from fitting._cube_regions import AUTO_REGION_MAX, _solver_memory, auto_region  # noqa: E402
 
 NY, NX = 6, 5
 
@@ -231,7 +232,7 @@ def test_cli_fit_cube_auto_regions_and_resume(tmp_path, capsys):
 @pytest.mark.slow
 def test_the_budget_inside_a_local_cluster_worker_is_its_memory_limit(tmp_path):
     distributed = pytest.importorskip("distributed")
-    from fitting._cube import _budget_and_slots
+    from fitting._cube_regions import _budget_and_slots
 
     limit = 1 << 30
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, memory_limit=limit,

@@ -5,7 +5,7 @@ The joint calibration objective with ρg(λ) free at 301 wavelengths hung in ``f
 the damped Gauss–Newton system, the eigenvalues of the ``sigma_tol`` stopping test), and
 jaxlib 0.10's CPU LAPACK kernels block an XLA pool thread while the parts of a batch run on the
 same pool: with both pool threads of a 2-core machine blocked, nothing ran the parts. A batched
-solve now runs fit by fit with the single fit's program (``fitting._solve.BLOCK``), and a
+solve now runs fit by fit with the single fit's program (``fitting._compiled_fit.BLOCK``), and a
 solve that stops using CPU is reported (``fitting._watchdog.wait_for``).
 
 Every fit here passes ``stall_s``: were the deadlock back, the test would fail with the
@@ -25,7 +25,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from fitting import _solve
+from fitting import _compiled_fit, _solver_options
 from fitting._watchdog import wait_for
 
 #: Seconds without CPU time after which a fit in these tests is declared stuck (well above any
@@ -104,18 +104,18 @@ def test_batched_solve_holds_no_batched_lapack_call():
     kernels could split over the thread pool they are running on (the cause of the hang).
     The vmapped form (``block=4``) has such calls: the check can see them."""
     obj, _, _ = _series(31)
-    o = _solve.SolverOptions()
+    o = _solver_options.SolverOptions()
     n = 4
     args = jax.tree.map(lambda a: jnp.broadcast_to(a, (n,) + a.shape), obj.args())
-    y0 = jnp.broadcast_to(jnp.asarray(_solve.starting_point(obj, o, obj.layout.x0)), (n, obj.n_parameters))
+    y0 = jnp.broadcast_to(jnp.asarray(_solver_options.starting_point(obj, o, obj.layout.x0)), (n, obj.n_parameters))
 
     def calls(block):
-        fn = _solve.compiled_fit(obj, o, batched=True, block=block)
-        return _lapack_batch_dims(fn.lower(y0, args, obj.optics, _solve.NEVER).as_text())
+        fn = _compiled_fit.compiled_fit(obj, o, batched=True, block=block)
+        return _lapack_batch_dims(fn.lower(y0, args, obj.optics, _solver_options.NEVER).as_text())
 
     if jax.device_count() > 1:
         pytest.skip("several devices: the fits of a block are split over them")
-    found = calls(_solve.BLOCK)
+    found = calls(_compiled_fit.BLOCK)
     if not found:
         pytest.skip("this jaxlib lowers no LAPACK custom call on the CPU")
     assert "lapack_dgeqrf_ffi" in {t for t, _ in found}  # the QR step (the stopping test: block QR or eigh)
@@ -230,9 +230,9 @@ def test_fit_batch_reports_a_stuck_chunk(monkeypatch):
     and what was done, instead of waiting."""
     obj, clean, bare = _series(11)
     event = threading.Event()
-    real = _solve.compiled_fit
+    real = _compiled_fit.compiled_fit
 
-    def stuck(objective, o, batched, block=_solve.BLOCK):
+    def stuck(objective, o, batched, block=_compiled_fit.BLOCK):
         fn = real(objective, o, batched, block)
         return lambda *a: fn(*a)._replace(x=_Pending(event))
 

@@ -5,7 +5,7 @@
   ``geometry.measure``, bit for bit, compiled.
 * ``fit`` compiles its solver once: a second fit of the same objective on new data, and a
   multi-start (solved start after start by the same compiled solver), compile nothing.
-* The multi-start give-up rule (:func:`fitting._solve.give_up_rule`) ends hopeless starts; the
+* The multi-start give-up rule (:func:`fitting._multistart.give_up_rule`) ends hopeless starts; the
   chosen start is the single fit's.
 
 Compilations are counted with JAX's own compile events (``jax.monitoring``), not timed.
@@ -20,7 +20,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from fitting import _solve
+from fitting import _compiled_fit, _fit_jit, _multistart, _solver_options
 from fitting._status import ABANDONED, STATUS
 from _helpers import compiles
 
@@ -97,15 +97,15 @@ def test_second_fit_and_multistart_compile_nothing(objective):
 
 
 def test_give_up_rule_and_abandoned_starts(objective):
-    assert _solve.give_up_rule(np.inf, 0) == _solve.NEVER
-    assert _solve.give_up_rule(50.0, 11) == (33, 500.0)
-    assert _solve.give_up_rule(50.0, 4) == (_solve.GIVE_UP_MIN_STEPS, 500.0)
+    assert _multistart.give_up_rule(np.inf, 0) == _solver_options.NEVER
+    assert _multistart.give_up_rule(50.0, 11) == (33, 500.0)
+    assert _multistart.give_up_rule(50.0, 4) == (_multistart.GIVE_UP_MIN_STEPS, 500.0)
     assert ABANDONED in STATUS and "given up" in STATUS[ABANDONED]
-    o = _solve.SolverOptions("lm", max_steps=256)
-    fn = _solve.compiled_fit(objective, o, batched=False)
-    y0 = _solve.starting_point(objective, o, objective.layout.x0)
+    o = _solver_options.SolverOptions("lm", max_steps=256)
+    fn = _compiled_fit.compiled_fit(objective, o, batched=False)
+    y0 = _solver_options.starting_point(objective, o, objective.layout.x0)
     plain = fn(y0, objective.args(), objective.optics)
-    cost = float(_solve._cost(jax.tree.map(np.asarray, plain)))
+    cost = float(_multistart._cost(jax.tree.map(np.asarray, plain)))
     # a rule that cannot fire leaves the fit as it was; one whose cost limit lies below the
     # optimum ends the solve at its step count, marked abandoned
     same = fn(y0, objective.args(), objective.optics, (1000, 10.0 * cost))
@@ -155,10 +155,10 @@ def test_compiled_fit_of_table_materials_holds_no_host_callback():
     e = ls.ellipsometry(stack(120.0), wl, np.asarray([60.0]))
     obj = ft.Objective(stack(100.0), wl, [ft.Dataset(ls.Ellipsometric(60.0, "psi"), np.asarray(e.psi_deg)[0], sigma=0.01)],
                        [ft.thickness("film", lower=20.0, upper=300.0)])
-    o = _solve.SolverOptions()
-    fn = _solve.compiled_fit(obj, o, batched=False)
-    y0 = _solve.starting_point(obj, o, obj.layout.x0)
-    jaxpr = str(jax.make_jaxpr(fn.jitted)(y0, obj.args(), obj.optics, _solve.NEVER))
+    o = _solver_options.SolverOptions()
+    fn = _compiled_fit.compiled_fit(obj, o, batched=False)
+    y0 = _solver_options.starting_point(obj, o, obj.layout.x0)
+    jaxpr = str(jax.make_jaxpr(fn.jitted)(y0, obj.args(), obj.optics, _solver_options.NEVER))
     assert "callback" not in jaxpr
     assert float(np.squeeze(ft.fit(obj).values["thickness[film]"])) == pytest.approx(120.0, rel=1e-8)
     # outside the solver the same materials are still checked under jit
@@ -173,7 +173,7 @@ def test_compiling_a_fit_traces_the_model_once(method, monkeypatch):
     forward-mode Jacobian around it) once: optimistix calls the residual function in a
     structure pass and again in its loop, under different abstract-mesh contexts, which made
     JAX's tracing cache miss and the model — most of a fit's tracing time — be traced twice
-    (``fitting._solve._traced_once``). Counted in Python calls of ``predict``, for a single fit
+    (``fitting._fit_functions._traced_once``). Counted in Python calls of ``predict``, for a single fit
     and a batched one; a second fit traces nothing."""
     data = _data(0)[:1]
     obj = ft.Objective(_stack(115.0, 1.54, TRUTH[2]), WL, [ft.Dataset(ls.Ellipsometric(ANGLES[0], "psi"), data[0], sigma=SIGMA)],
@@ -193,30 +193,30 @@ def test_compiling_a_fit_traces_the_model_once(method, monkeypatch):
 
 def test_single_fit_compiler_options(monkeypatch):
     """A single fit's programs are compiled on the CPU with
-    :data:`fitting._solve.SINGLE_FIT_COMPILER_OPTIONS` (XLA's classic fusion emitters: about
+    :data:`fitting._fit_jit.SINGLE_FIT_COMPILER_OPTIONS` (XLA's classic fusion emitters: about
     half the compile time of a fit): known to this XLA, and the fit is the one XLA's default
     options give (values to 1e-9, standard errors to 1e-6). An option the XLA does not know, a GPU
     backend, or the same option in the user's ``XLA_FLAGS`` leave XLA's defaults."""
-    probe = _solve._compiler_options
+    probe = _fit_jit._compiler_options
     probe.cache_clear()
     try:
-        assert probe("cpu") == _solve.SINGLE_FIT_COMPILER_OPTIONS
+        assert probe("cpu") == _fit_jit.SINGLE_FIT_COMPILER_OPTIONS
         assert probe("gpu") is None
         fresh = _objective()
         with_options = ft.fit(fresh)
         (fn,) = [v for k, v in fresh.cache.items() if k[0] == "fit"]
         assert fn.jitted.top is not fn.jitted.jitted  # the single fit was compiled with the options
-        monkeypatch.setattr(_solve, "_compiler_options", lambda backend: None)
+        monkeypatch.setattr(_fit_jit, "_compiler_options", lambda backend: None)
         default = ft.fit(_objective())
         assert with_options.converged and default.converged
         np.testing.assert_allclose(np.asarray(with_options.x), np.asarray(default.x), rtol=1e-9)
         np.testing.assert_allclose(np.asarray(with_options.x_stderr), np.asarray(default.x_stderr), rtol=1e-6)
-        monkeypatch.setattr(_solve, "_compiler_options", probe)
+        monkeypatch.setattr(_fit_jit, "_compiler_options", probe)
         monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
         probe.cache_clear()
         assert probe("cpu") is None
         monkeypatch.delenv("XLA_FLAGS")
-        monkeypatch.setattr(_solve, "SINGLE_FIT_COMPILER_OPTIONS", {"xla_cpu_no_such_option_here": False})
+        monkeypatch.setattr(_fit_jit, "SINGLE_FIT_COMPILER_OPTIONS", {"xla_cpu_no_such_option_here": False})
         probe.cache_clear()
         assert probe("cpu") is None
     finally:

@@ -19,7 +19,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from fitting import _solve
+from fitting import _compiled_fit
 
 WL = np.linspace(400.0, 700.0, 41)
 ALPHA_BASIS = ft.bspline_basis(WL, 3)
@@ -339,8 +339,8 @@ def test_second_fit_with_other_data_does_not_retrace(monkeypatch):
     eqx.debug.assert_max_traces on the statistics, traced once per compilation)."""
     import equinox as eqx
 
-    original = _solve._statistics_function
-    monkeypatch.setattr(_solve, "_statistics_function", lambda o: eqx.debug.assert_max_traces(original(o), max_traces=1))
+    original = _compiled_fit._statistics_function
+    monkeypatch.setattr(_compiled_fit, "_statistics_function", lambda o: eqx.debug.assert_max_traces(original(o), max_traces=1))
     y1 = np.asarray(ls.reflectance(_slab(10_000.0, 2e-5), WL, T0))
     y2 = np.asarray(ls.reflectance(_slab(13_000.0, 2e-5), WL, T0))
     obj = ft.Objective(_slab(8_000.0, 2e-5), WL, ft.Dataset(T0, y1), [ft.thickness("slab")])

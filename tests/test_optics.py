@@ -11,7 +11,7 @@ import pytest
 
 import fitting
 import layerstack_jax as ls
-from fitting._solve import dense_jacobian
+from fitting._fit_functions import dense_jacobian
 
 WL = np.linspace(420.0, 700.0, 15)
 

@@ -172,7 +172,7 @@ def test_cli_fit_gives_the_alpha_h_advice_and_the_combination(tmp_path, capsys):
     from layerstack_cli import main
     from layerstack_jax.io import save_spectra_csv
 
-    from fitting._cube import structural_degeneracy
+    from fitting._fit_findings import structural_degeneracy
 
     wl = np.arange(400.0, 701.0, 10.0)
     stack = tmp_path / "s.toml"

@@ -17,7 +17,7 @@ import pytest
 
 import fitting as ft
 import layerstack_jax as ls
-from fitting import _solve, _structured
+from fitting import _fit_functions, _structured
 from layerstack_jax import LayerstackError
 
 SIGMA = 0.002
@@ -97,12 +97,12 @@ def calibration():
 
 # ----------------------------------------------------------------------------- the Jacobian
 def test_structure_found_and_compressed_jacobian_is_the_full_one(slab):
-    st = _solve.structure_for(slab, "structured", "lm")
+    st = _fit_functions.structure_for(slab, "structured", "lm")
     assert (st.b, st.g, st.k, st.W) == (2, 1, 4, 24)  # n, α per wavelength; one thickness; 2 datasets × 2 samples
     x = slab.layout.x0 * 1.01
     scale = jnp.asarray(slab.layout.scale)
     args = slab.args()
-    fn = _structured.structured_statistics_function(slab, st, ft._solve._residuals_and_parts(slab))
+    fn = _structured.structured_statistics_function(slab, st, _fit_functions._residuals_and_parts(slab))
     J = fn(jnp.asarray(x), args, slab.optics)[3]
     assert np.shape(J.K) == (st.M, 3)  # three tangents for 49 parameters
     full = np.asarray(jax.jacfwd(lambda z: slab.residuals(z * scale, args, slab.optics))(jnp.asarray(x) / scale))
@@ -111,7 +111,7 @@ def test_structure_found_and_compressed_jacobian_is_the_full_one(slab):
 
 def test_the_structure_check_refuses_a_model_that_mixes_wavelengths(slab):
     st, _ = _structured.find_structure(slab)
-    parts = ft._solve._residuals_and_parts(slab)
+    parts = _fit_functions._residuals_and_parts(slab)
 
     def smeared(z, args, optics):  # a neighbour's value leaks into each reading (a bandwidth)
         flat, by = parts(z, args, optics)
@@ -128,9 +128,9 @@ def test_no_structure_where_there_is_none():
     g = ls.Directional(45.0, 0.0)
     y = np.asarray(ls.reflectance(stack, wl, g))[None]
     basis_only = ft.Objective(stack, wl, ft.Dataset(g, y, sigma=SIGMA), [ft.alpha("v", basis=4), ft.thickness("v")])
-    assert _solve.structure_for(basis_only, "auto", "lm") is None
+    assert _fit_functions.structure_for(basis_only, "auto", "lm") is None
     with pytest.raises(LayerstackError, match="no parameter is free per wavelength"):
-        _solve.structure_for(basis_only, "structured", "lm")
+        _fit_functions.structure_for(basis_only, "structured", "lm")
     smooth = ft.Objective(stack, wl, ft.Dataset(g, y, sigma=SIGMA), [ft.rho_g(basis="free", smoothness=1.0)])
     with pytest.raises(LayerstackError, match="smoothness"):
         ft.fit(smooth, structure="structured")
@@ -206,7 +206,7 @@ def test_coverage_401_wavelengths_rho_g_and_alpha_free():
     of values within ±2 standard errors of the truth is that of a Gaussian (95.4 %; 90–98 %
     accepted)."""
     obj, clean, bare, truth = _calibration(401, "free")
-    assert _solve.structure_for(obj, "auto", "lm").b == 2
+    assert _fit_functions.structure_for(obj, "auto", "lm").b == 2
     rng = np.random.default_rng(11)
     inside, total, converged = 0, 0, 0
     for _ in range(100):
@@ -242,7 +242,7 @@ def test_a_fixed_value_inside_a_free_spectrum():
     params = [ft.thickness("slab", value=[200_000.0, 330_000.0], per_sample=True, fixed=np.array([True, False])),
               ft.Parameter(("layers", "slab", "alpha"), "alpha", "alpha", value=start, basis="free", fixed=fixed)]
     obj = ft.Objective(stack(h[0], jnp.asarray(start)), wl, ft.Dataset(g, y, sigma=SIGMA), params, n_samples=2)
-    st = _solve.structure_for(obj, "structured", "lm")
+    st = _fit_functions.structure_for(obj, "structured", "lm")
     assert not st.present[[3, 11], 0].any() and st.present.sum() == 18
     s = ft.fit(obj, structure="structured")
     d = ft.fit(obj, structure="dense")
@@ -287,7 +287,7 @@ def test_per_sample_free_spectrum_and_a_bare_dataset():
               ft.alpha("v", basis=3, value=[1.5e-5, 1.5e-5, 1.5e-5]),
               ft.rho_g(basis="free", per_sample=True, value=np.full((2, 18), 0.45))]
     obj = ft.Objective(st(10_000.0, 0.45, 1.5e-5), wl, datasets, params, n_samples=2)
-    stc = _solve.structure_for(obj, "structured", "lm")
+    stc = _fit_functions.structure_for(obj, "structured", "lm")
     assert (stc.b, stc.g, stc.k) == (2, 3, 5)
     s = ft.fit(obj, structure="structured")
     d = ft.fit(obj, structure="dense")

@@ -30,8 +30,9 @@ Layout after refnx (Parameter → Objective → fitter → results) and optimist
   resumable, on Dask (local or a cluster), maps written to zarr; its regions sized in
   :mod:`fitting._cube_regions`, its zarr store and resume markers in :mod:`fitting._cube_store`;
 * :mod:`fitting._design` — coating design: :func:`optimize_thicknesses` to
-  :class:`SpectralTarget` / :class:`ColourTarget`, the needle method (:func:`needle_design`),
-  thickness-error yield and robust design (:func:`thickness_yield`, :class:`RobustSpec`);
+  :class:`SpectralTarget` / :class:`ColourTarget` (:mod:`fitting._design_targets`, with their
+  :func:`merit`), thickness-error yield and robust design (:func:`thickness_yield`,
+  :class:`RobustSpec`); the needle method (:func:`needle_design`) in :mod:`fitting._needle`;
 * :mod:`fitting._design_file` — design files for ``layerstack design`` (targets, optimizer and
   robustness tables on top of a stack file; this module owns their format): :func:`load_design`;
   :mod:`fitting._design_run` runs one: :func:`run_design`, :func:`design_report`,
@@ -60,16 +61,9 @@ from ._cube_regions import cube_regions as cube_regions
 from ._cube_store import cube_parameters as cube_parameters
 from ._dataset import Dataset as Dataset
 from ._dataset import resample as resample
-from ._design import ColourTarget as ColourTarget
 from ._design import DesignResult as DesignResult
-from ._design import NeedleScan as NeedleScan
 from ._design import RobustSpec as RobustSpec
-from ._design import SpectralTarget as SpectralTarget
 from ._design import YieldResult as YieldResult
-from ._design import insert_needle as insert_needle
-from ._design import merit as merit
-from ._design import needle_design as needle_design
-from ._design import needle_function as needle_function
 from ._design import optimize_thicknesses as optimize_thicknesses
 from ._design import thickness_yield as thickness_yield
 from ._design import with_thicknesses as with_thicknesses
@@ -80,12 +74,19 @@ from ._design_run import design_report as design_report
 from ._design_run import design_stack_dict as design_stack_dict
 from ._design_run import plot_design as plot_design
 from ._design_run import run_design as run_design
+from ._design_targets import ColourTarget as ColourTarget
+from ._design_targets import SpectralTarget as SpectralTarget
+from ._design_targets import merit as merit
 from ._drawdown import drawdown_calibration as drawdown_calibration
 from ._fit_file import FitFile as FitFile
 from ._fit_file import load_fit_file as load_fit_file
 from ._fit_file import load_fit_parameters as load_fit_parameters
 from ._fit_file import parameter_of as parameter_of
 from ._fit_file import parameters_from_annotations as parameters_from_annotations
+from ._needle import NeedleScan as NeedleScan
+from ._needle import insert_needle as insert_needle
+from ._needle import needle_design as needle_design
+from ._needle import needle_function as needle_function
 from ._objective import Objective as Objective
 from ._parameters import Parameter as Parameter
 from ._parameters import alpha as alpha

@@ -28,20 +28,34 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import Geometry, LambertianBackground, LayerstackError, Stack, invert_background, progress_reporter
+from layerstack_jax import (
+    Geometry,
+    LambertianBackground,
+    LayerstackError,
+    Stack,
+    invert_background,
+    progress_reporter,
+)
 
+from ._bound_settling import BY_LBFGSB, RESTARTED, bound_note, settle_on_bounds
+from ._compiled_fit import compiled_fit, refit_chi2
 from ._dataset import Dataset
+from ._multistart import multistart_points
 from ._objective import Objective
 from ._parameters import alpha as alpha_parameter
 from ._parameters import rho_g as rho_g_parameter
 from ._parameters import thickness as thickness_parameter
 from ._results import build_result
-from ._bound_settling import BY_LBFGSB, RESTARTED, bound_note, settle_on_bounds
-from ._compiled_fit import compiled_fit, refit_chi2
-from ._multistart import multistart_points
 from ._solver_options import SolverOptions, require_compiled_method, starting_point
-from ._statistics import (SIGMA_DEFAULT, SIGMA_GIVEN, FitStatistics, batch_separability, bound_contacts,
-                          fit_statistics, separability_summary)
+from ._statistics import (
+    SIGMA_DEFAULT,
+    SIGMA_GIVEN,
+    FitStatistics,
+    batch_separability,
+    bound_contacts,
+    fit_statistics,
+    separability_summary,
+)
 from ._status import CONVERGED, INVALID_DATA, result_message
 from ._watchdog import STALL_S, wait_for
 

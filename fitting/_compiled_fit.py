@@ -15,7 +15,12 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from layerstack_jax import traced_checks_off
 
 from ._bounded import compiled_lbfgsb
-from ._fit_functions import _statistics_function, hold_on_bounds, jacobian_with_statistics, structure_for
+from ._fit_functions import (
+    _statistics_function,
+    hold_on_bounds,
+    jacobian_with_statistics,
+    structure_for,
+)
 from ._fit_jit import fit_jit
 from ._fit_output import FitOutput
 from ._host_fit import _host_fit

@@ -90,7 +90,15 @@ from layerstack_jax import LayerstackError, open_cube, progress_reporter
 
 from ._batch import fit_batch
 from ._cube_regions import _budget_and_slots, auto_region, cube_regions
-from ._cube_store import _empty_maps, _fingerprint, _init_store, _mark_done, _marker, _var, _write_region
+from ._cube_store import (
+    _empty_maps,
+    _fingerprint,
+    _init_store,
+    _mark_done,
+    _marker,
+    _var,
+    _write_region,
+)
 from ._fit_findings import structural_degeneracy
 from ._objective import Objective
 from ._solver_options import require_compiled_method
@@ -222,7 +230,9 @@ def _fit_region(objective: Objective, block, user_mask, iy: int, ix: int, ys: sl
             stderr = r.stderr * (np.sqrt(r.dof / np.maximum(dof, 1))[:, None] if r.covariance_scaled else 1.0)
         verdict = np.zeros(dof.shape, np.int8)
         if s.sigma_given:
-            from scipy.special import chdtrc  # the χ² upper tail (scipy.stats.chi2.sf), without importing scipy.stats
+            from scipy.special import (
+                chdtrc,  # the χ² upper tail (scipy.stats.chi2.sf), without importing scipy.stats
+            )
 
             tail = chdtrc(np.maximum(dof, 1), r.chi2)
             verdict[~(tail >= (1.0 - CHI2_CENTRAL) / 2)] = 5  # NaN χ² too

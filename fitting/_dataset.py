@@ -15,7 +15,13 @@ from typing import Optional
 import numpy as np
 from jax.typing import ArrayLike
 
-from layerstack_jax import ColourSpace, Geometry, LayerstackError, LayerstackWarning, RealLike
+from layerstack_jax import (
+    ColourSpace,
+    Geometry,
+    LayerstackError,
+    LayerstackWarning,
+    RealLike,
+)
 
 __all__ = ["Dataset", "resample", "NEGATIVE_READING_FLOOR"]
 

@@ -1,26 +1,12 @@
-r"""Gradient-based coating design: layer thicknesses to spectral targets, needle insertion,
-thickness-error yield and robust design.
+r"""Gradient-based coating design: layer thicknesses to targets, thickness-error yield and
+robust design.
 
-The merit function is a weighted sum over targets of mean squared, tolerance-scaled deviations,
-
-.. math::
-    M(\mathbf d) = \sum_k \frac{w_k}{N_k}\sum_{i} \Big(\frac{Q_k(\lambda_i, \theta_i; \mathbf d)
-    - Q^\text{target}_{k,i}}{\delta_{k,i}}\Big)^2,
-
-with :math:`Q` a reflectance, transmittance or absorptance of the stack
-(:func:`layerstack_jax.specular`, natural or polarized light). ``'below'`` / ``'above'`` targets
-penalise only the side that violates the bound (a one-sided tolerance band), as thin-film
-design programs do. :math:`M` is minimised over the free thicknesses within bounds by L-BFGS-B,
-gradients by reverse-mode autodiff through the Rouard recursion — the bounded driver shared
-with :func:`~fitting.fit` (:mod:`fitting._bounded`): jaxopt's, several starts run as one
-vmapped solve, or SciPy's on the host (one compiled merit and gradient, quick to start).
-
-The **needle method** (Tikhonravov, Trubetskov & DeBell, Appl. Opt. 35, 5493 (1996)) grows a
-design: the derivative of :math:`M` with respect to the thickness of an infinitesimally thin
-layer of a candidate material inserted at depth *z* — the needle function :math:`P(z)` — is
-computed here exactly by automatic differentiation at zero needle thickness. Where
-:math:`P(z) < 0` a needle lowers the merit; it is inserted at the most negative point and all
-thicknesses are refined again.
+The merit :math:`M` of the targets (:func:`~fitting.merit`, :mod:`fitting._design_targets`) is
+minimised over the free thicknesses within bounds by L-BFGS-B, gradients by reverse-mode
+autodiff through the Rouard recursion — the bounded driver shared with :func:`~fitting.fit`
+(:mod:`fitting._bounded`): jaxopt's, several starts run as one vmapped solve, or SciPy's on the
+host (one compiled merit and gradient, quick to start). The needle method, which grows a design
+by inserting layers, is :mod:`fitting._needle`.
 
 Units: thicknesses in nm, wavelengths in nm, angles in degrees (these are the edges).
 """
@@ -33,164 +19,21 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Real
 
 import layerstack_jax as ls
 from layerstack_jax import LayerstackError
 
 from ._bounded import BoundedSolution, compiled_lbfgsb, host_lbfgsb
+from ._design_targets import merit
 
 __all__ = [
-    "SpectralTarget",
-    "ColourTarget",
-    "merit",
     "DesignResult",
     "optimize_thicknesses",
-    "NeedleScan",
-    "needle_function",
-    "insert_needle",
-    "needle_design",
     "RobustSpec",
     "YieldResult",
     "with_thicknesses",
     "thickness_yield",
 ]
-
-
-class SpectralTarget(eqx.Module):
-    """A spectral design target.
-
-    Attributes:
-        wavelength_nm: wavelengths in nm, shape ``(W,)``.
-        value: target values (R, T, A are dimensionless fractions), broadcastable to shape
-            ``(A, W)`` (A = number of angles).
-        tolerance: tolerance (> 0) of each point, broadcastable to ``(A, W)``: deviations are
-            measured in units of it.
-        quantity: ``'R'`` (reflectance), ``'T'`` (transmittance into the exit medium) or ``'A'``
-            (absorptance 1 − R − T), for light from the ambient.
-        angle_deg: ``(A,)`` angles of incidence in degrees (default normal incidence).
-        polarization: ``'natural'`` (mean of s and p), ``'s'`` or ``'p'``.
-        kind: ``'equal'`` (two-sided), ``'below'`` (Q ≤ value) or ``'above'`` (Q ≥ value).
-        weight: weight of this target in the merit.
-    """
-
-    wavelength_nm: Float[Array, " W"] = eqx.field(converter=jnp.asarray)
-    value: Real[Array, "..."] = eqx.field(converter=jnp.asarray)
-    tolerance: Real[Array, "..."] = eqx.field(converter=jnp.asarray, default=0.01)
-    quantity: Literal["R", "T", "A"] = eqx.field(static=True, default="R")
-    angle_deg: Float[Array, " A"] = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
-    polarization: Literal["natural", "s", "p"] = eqx.field(static=True, default="natural")
-    kind: Literal["equal", "below", "above"] = eqx.field(static=True, default="equal")
-    weight: float = 1.0
-
-    def __check_init__(self):
-        if self.quantity not in ("R", "T", "A"):
-            raise LayerstackError(f"SpectralTarget.quantity must be 'R', 'T' or 'A', got {self.quantity!r}")
-        if self.polarization not in ("natural", "s", "p"):
-            raise LayerstackError(
-                f"SpectralTarget.polarization must be 'natural', 's' or 'p', got {self.polarization!r}"
-            )
-        if self.kind not in ("equal", "below", "above"):
-            raise LayerstackError(f"SpectralTarget.kind must be 'equal', 'below' or 'above', got {self.kind!r}")
-        if self.wavelength_nm.ndim != 1:
-            raise LayerstackError(f"SpectralTarget.wavelength_nm must be 1-D, got shape {self.wavelength_nm.shape}")
-        tol = np.asarray(self.tolerance)
-        if np.any(~np.isfinite(tol)) or np.any(tol <= 0):
-            raise LayerstackError("SpectralTarget.tolerance must be finite and > 0")
-        if np.any(~np.isfinite(np.asarray(self.value))):
-            raise LayerstackError("SpectralTarget.value contains NaN or infinite values")
-        angles = np.asarray(self.angle_deg)
-        if np.any(angles < 0) or np.any(angles >= 90):
-            raise LayerstackError("SpectralTarget.angle_deg must lie in [0, 90) degrees")
-        try:
-            np.broadcast_shapes(np.shape(self.value), (angles.size, self.wavelength_nm.size))
-            np.broadcast_shapes(np.shape(tol), (angles.size, self.wavelength_nm.size))
-        except ValueError:
-            raise LayerstackError(
-                f"SpectralTarget.value {np.shape(self.value)} / tolerance {np.shape(tol)} do not broadcast to "
-                f"(angles, wavelengths) = ({angles.size}, {self.wavelength_nm.size})"
-            ) from None
-
-    def evaluate(self, stack: ls.Stack) -> Float[Array, "A W"]:
-        """The targeted quantity of ``stack``, shaped ``(A, W)``."""
-        out = ls.specular(stack, self.wavelength_nm, self.angle_deg, both_sides=False)  # degrees
-        R, T = out.R_front, out.T_front  # (A, 2, W)
-        if self.polarization == "natural":
-            R, T = 0.5 * (R[:, 0] + R[:, 1]), 0.5 * (T[:, 0] + T[:, 1])
-        else:
-            i = 0 if self.polarization == "s" else 1
-            R, T = R[:, i], T[:, i]
-        return {"R": R, "T": T, "A": 1.0 - R - T}[self.quantity]
-
-    def deviation(self, stack: ls.Stack) -> Float[Array, "A W"]:
-        """Signed violation in units of the tolerance (0 inside a one-sided band)."""
-        x = (self.evaluate(stack) - self.value) / self.tolerance
-        if self.kind == "below":
-            return jnp.maximum(x, 0.0)
-        if self.kind == "above":
-            return jnp.minimum(x, 0.0)
-        return x
-
-    def merit(self, stack: ls.Stack):
-        """``weight · mean(deviation²)``."""
-        return self.weight * jnp.mean(self.deviation(stack) ** 2)
-
-    def within_spec(self, stack: ls.Stack):
-        """True where every point lies within its tolerance (|deviation| ≤ 1)."""
-        return jnp.all(jnp.abs(self.deviation(stack)) <= 1.0)
-
-
-class ColourTarget(eqx.Module):
-    """A colour design target: the CIELAB colour of the stack's specular reflectance (natural
-    light) under the illuminant and observer of ``colour_space``, at one or more angles.
-
-    Attributes:
-        colour_space: a :class:`layerstack_jax.ColourSpace` (its grid is the evaluation grid).
-        lab: target L*, a*, b* (CIELAB, dimensionless), shape ``(3,)`` or ``(A, 3)``.
-        angle_deg: ``(A,)`` angles of incidence, degrees.
-        tolerance: ΔE2000 counted as one unit of deviation (within spec: ΔE2000 ≤ tolerance).
-        weight: weight in the merit.
-    """
-
-    colour_space: ls.ColourSpace
-    lab: Real[Array, "*A 3"] = eqx.field(converter=jnp.asarray)
-    angle_deg: Float[Array, " A"] = eqx.field(converter=lambda a: jnp.atleast_1d(jnp.asarray(a, float)), default=0.0)
-    tolerance: float = 1.0
-    weight: float = 1.0
-
-    def __check_init__(self):
-        if np.shape(self.lab)[-1:] != (3,) or np.any(~np.isfinite(np.asarray(self.lab))):
-            raise LayerstackError(f"ColourTarget.lab must be finite L*, a*, b* values (..., 3), got {np.shape(self.lab)}")
-        if not float(self.tolerance) > 0:
-            raise LayerstackError("ColourTarget.tolerance (ΔE2000) must be > 0")
-        angles = np.asarray(self.angle_deg)
-        if np.any(angles < 0) or np.any(angles >= 90):
-            raise LayerstackError("ColourTarget.angle_deg must lie in [0, 90) degrees")
-
-    def evaluate(self, stack: ls.Stack) -> Float[Array, "A 3"]:
-        """CIELAB of the natural-light specular reflectance at each angle, ``(A, 3)``."""
-        wl = jnp.asarray(self.colour_space.wavelength_nm)
-        R = ls.specular(stack, wl, self.angle_deg, both_sides=False).R_front  # degrees
-        return self.colour_space.Lab(0.5 * (R[:, 0] + R[:, 1]))
-
-    def deviation(self, stack: ls.Stack) -> Float[Array, " A"]:
-        """ΔE2000 to the target in units of the tolerance."""
-        return ls.delta_e_2000(self.evaluate(stack), self.lab) / self.tolerance
-
-    def merit(self, stack: ls.Stack):
-        return self.weight * jnp.mean(self.deviation(stack) ** 2)
-
-    def within_spec(self, stack: ls.Stack):
-        return jnp.all(self.deviation(stack) <= 1.0)
-
-
-def merit(stack: ls.Stack, targets: Sequence):
-    """Total merit of ``stack`` against ``targets`` (:class:`SpectralTarget`,
-    :class:`ColourTarget`): the sum of their ``merit`` — each a weighted mean of squared
-    deviations in units of the target's tolerance, so a dimensionless scalar."""
-    if not targets:
-        raise LayerstackError("design needs at least one target")
-    return sum(t.merit(stack) for t in targets)
 
 
 # ------------------------------------------------------------------ free thicknesses
@@ -352,217 +195,6 @@ def optimize_thicknesses(
         converged=bool(ok[best]),
         message=messages[best],
     )
-
-
-# ------------------------------------------------------------------ needle method
-class NeedleScan(NamedTuple):
-    """Needle function sampled at candidate insertion points.
-
-    ``layer``: shape ``(P,)``, index of the layer that would be split (``-1``: on top of the first
-    layer); ``fraction``: ``(P,)`` depth inside that layer as a fraction of its thickness, from
-    the side of the ambient; ``derivative``: ``(M, P)`` dM/dt at t = 0 for each candidate
-    material ``M`` (negative: a needle helps), in 1/nm (dimensionless merit per nm of needle);
-    ``fraction`` is dimensionless.
-    """
-
-    layer: np.ndarray
-    fraction: np.ndarray
-    derivative: np.ndarray
-
-
-def _split_with_needle(stack: ls.Stack, j: int, f, material, t, name: str = "needle") -> ls.Stack:
-    """Layer ``j`` split at fraction ``f`` with a needle of ``material``, thickness ``t`` inside
-    (``j = -1``: needle on top of the first layer)."""
-    layers = list(stack.layers)
-    needle = ls.Layer(material, t, name=name)
-    if j < 0:
-        return ls.Stack(stack.ambient, [needle, *layers], stack.exit)
-    host = layers[j]
-    top = eqx.tree_at(lambda lay: lay.thickness, host, host.thickness * f)
-    bottom = eqx.tree_at(lambda lay: lay.thickness, host, host.thickness * (1.0 - f))
-    return ls.Stack(stack.ambient, [*layers[:j], top, needle, bottom, *layers[j + 1 :]], stack.exit)
-
-
-def _common_grid(targets: Sequence) -> Optional[np.ndarray]:
-    grids = [np.asarray(t.colour_space.wavelength_nm if isinstance(t, ColourTarget) else t.wavelength_nm)
-             for t in targets]
-    same = all(g.shape == grids[0].shape and np.array_equal(g, grids[0]) for g in grids)
-    return grids[0] if same else None
-
-
-def _sampled(material, grid) -> ls.Index:
-    """``material`` as an :class:`~layerstack_jax.Index` sampled on ``grid`` (shape ``(W,)``)."""
-    n = np.broadcast_to(np.asarray(ls.Layer(material, 0.0).index(grid)), grid.shape)
-    return ls.Index(np.real(n).copy(), np.imag(n).copy())
-
-
-def _uniform(stack: ls.Stack, grid) -> ls.Stack:
-    """Same optics, every medium an Index on ``grid`` and no names: stacks that differ only in
-    where a needle sits then share one pytree structure, so one compiled function serves all."""
-    layers = [
-        ls.Layer(_sampled(layer.index, grid), layer.thickness, coherent=layer.coherent, alpha=layer.alpha)
-        for layer in stack.layers
-    ]
-    exit_ = eqx.tree_at(lambda e: e.index, stack.exit, _sampled(stack.exit.index, grid))
-    return ls.Stack(_sampled(stack.ambient, grid), layers, exit_)
-
-
-def needle_function(
-    stack: ls.Stack, targets: Sequence, materials: Sequence, *, points_per_layer: int = 32
-) -> NeedleScan:
-    """Needle function P(z) = ∂M/∂t at t = 0 of a needle of each candidate material inserted
-    at ``points_per_layer`` depths inside every coherent layer (and on top of the stack).
-
-    Exact derivatives (reverse-mode autodiff at zero needle thickness). The candidate stacks are
-    batched by pytree structure and differentiated in one vmapped call per structure — a single
-    compilation when all targets share one wavelength grid (materials are then sampled on it).
-
-    Returns a :class:`NeedleScan` with ``derivative`` of shape ``(M, P)`` in 1/nm (M candidate
-    materials, P insertion points).
-    """
-    if not materials:
-        raise LayerstackError("needle_function needs at least one candidate material")
-    grid = _common_grid(targets)
-    base = _uniform(stack, grid) if grid is not None else stack
-    mats = [_sampled(m, grid) if grid is not None else m for m in materials]
-    fractions = (np.arange(points_per_layer) + 0.5) / points_per_layer
-    hosts = [-1] + [j for j, layer in enumerate(stack.layers) if layer.coherent]
-    rows = []  # (layer, fraction, material index, needle position, candidate stack)
-    for j in hosts:
-        for f in [0.0] if j < 0 else fractions:
-            for mi, m in enumerate(mats):
-                cand = _split_with_needle(base, j, float(f), m, 0.0, name="" if grid is not None else "needle")
-                rows.append((j, float(f), mi, j + 1 if j >= 0 else 0, cand))
-    groups: dict = {}
-    for i, row in enumerate(rows):
-        leaves, treedef = jax.tree_util.tree_flatten(row[4])
-        groups.setdefault((treedef, tuple(np.shape(x) for x in leaves)), []).append(i)
-    derivative = np.empty(len(rows))
-    for members in groups.values():
-        batch = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *[rows[i][4] for i in members])
-        grads = jax.jit(jax.vmap(jax.grad(lambda st: merit(st, targets))))(batch)
-        dd = np.stack([np.asarray(layer.thickness) for layer in grads.layers], axis=1)  # (C, layers)
-        derivative[members] = dd[np.arange(len(members)), [rows[i][3] for i in members]]
-    n_mat = len(materials)
-    layer = np.array([r[0] for r in rows[::n_mat]])
-    frac = np.array([r[1] for r in rows[::n_mat]])
-    return NeedleScan(layer, frac, derivative.reshape(-1, n_mat).T)
-
-
-def insert_needle(stack: ls.Stack, scan: NeedleScan, materials: Sequence, thickness_nm: float = 1.0,
-                  names: Optional[Sequence[str]] = None):
-    """Insert a needle of ``thickness_nm`` at the most negative point of ``scan``.
-
-    The needle layer is named ``names[m]`` for material ``m`` (default ``"needle"``).
-    Returns ``(new_stack, (material_index, layer, fraction, derivative))`` or ``(stack, None)``
-    when no point has a negative derivative (the design is needle-optimal). ``layer`` and
-    ``material_index`` are ints, ``fraction`` (dimensionless) and ``derivative`` (1/nm) scalars.
-    """
-    m, p = np.unravel_index(int(np.argmin(scan.derivative)), scan.derivative.shape)
-    if scan.derivative[m, p] >= 0:
-        return stack, None
-    if names is not None and len(names) != len(materials):
-        raise LayerstackError(f"insert_needle: {len(names)} names for {len(materials)} materials")
-    j, f = int(scan.layer[p]), float(scan.fraction[p])
-    name = "needle" if names is None else str(names[m])
-    new = _split_with_needle(stack, j, f, materials[m], float(thickness_nm), name=name)
-    new = ls.Stack(new.ambient, [_concrete(layer) for layer in new.layers], new.exit)
-    return new, (int(m), j, f, float(scan.derivative[m, p]))
-
-
-def _concrete(layer: ls.Layer) -> ls.Layer:
-    return eqx.tree_at(lambda lay: lay.thickness, layer, float(np.asarray(layer.thickness)))
-
-
-def _drop_thin_layers(stack: ls.Stack, min_nm: float) -> ls.Stack:
-    """Remove coherent layers thinner than ``min_nm`` (a needle the refinement shrank away)."""
-    kept = [layer for layer in stack.layers if not (layer.coherent and float(np.asarray(layer.thickness)) < min_nm)]
-    return ls.Stack(stack.ambient, kept, stack.exit)
-
-
-def needle_design(
-    stack: ls.Stack,
-    targets: Sequence,
-    materials: Sequence,
-    *,
-    iterations: int = 5,
-    max_layers: Optional[int] = None,
-    bounds_nm=(0.0, 1000.0),
-    points_per_layer: int = 32,
-    min_thickness_nm: float = 0.5,
-    maxiter: int = 500,
-    names: Optional[Sequence[str]] = None,
-    start: Optional[DesignResult] = None,
-    method: Literal["jaxopt", "scipy"] = "jaxopt",
-    progress: bool = True,
-) -> tuple[DesignResult, list[dict]]:
-    """Grow a design by the needle method: refine, scan the needle function, insert, repeat.
-
-    Every coherent layer's thickness is free. Stops after ``iterations`` insertions, when no
-    needle lowers the merit, or when ``max_layers`` would be exceeded. Needle layers are named
-    ``names[m]`` after their material (default ``"needle"``). ``start``: a refinement of
-    ``stack`` already made (e.g. multi-start, with per-layer bounds) to begin from instead of
-    refining ``stack`` again; ``method``: of the refinements (:func:`optimize_thicknesses`).
-    ``progress``: a progress bar (tqdm) over the refinements, with the current layer count and
-    merit. The final design holds no coherent layer thinner than ``min_thickness_nm``: such
-    layers are removed and the design refined again (a history entry with
-    ``"removed_thin_layers"``). Returns the final :class:`DesignResult` and a history (one dict
-    per step: layers, merit, inserted needle).
-
-    Thicknesses in nm (``bounds_nm``: ``(lower, upper)``, scalars applied to every layer;
-    ``min_thickness_nm``); merits are dimensionless scalars.
-    """
-    def refine(st):
-        return optimize_thicknesses(st, targets, bounds_nm=bounds_nm, maxiter=maxiter, method=method)
-
-    update = ls.progress_reporter(progress, iterations + 1, desc="needle design", unit="step")
-    step = 0
-    try:
-        result = start if start is not None else refine(stack)
-        history = [{"layers": len(result.stack.layers), "merit": result.merit, "needle": None}]
-        step += 1
-        _advance(update, step, result, "refined start")
-        for _ in range(iterations):
-            current = _drop_thin_layers(result.stack, min_thickness_nm)
-            if max_layers is not None and len(current.layers) + 2 > max_layers:
-                break
-            scan = needle_function(current, targets, materials, points_per_layer=points_per_layer)
-            candidate, needle = insert_needle(current, scan, materials, names=names)
-            if needle is None:
-                break
-            refined = refine(candidate)
-            if refined.merit >= result.merit:
-                break
-            result = refined
-            history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": needle})
-            step += 1
-            _advance(update, step, result, "needle inserted")
-        result = _enforce_min_thickness(result, min_thickness_nm, refine, history)
-    finally:
-        if update is not None:
-            update(iterations + 1)  # done (early stops included): the bar closes
-    return result, history
-
-
-def _thin_layers(stack: ls.Stack, min_nm: float) -> list:
-    return [i for i, layer in enumerate(stack.layers)
-            if layer.coherent and float(np.asarray(layer.thickness)) < min_nm]
-
-
-def _enforce_min_thickness(result: DesignResult, min_nm: float, refine, history: list) -> DesignResult:
-    """The final design without coherent layers thinner than ``min_nm``: they are removed and
-    the rest refined again, until none is left (each pass removes at least one layer)."""
-    while _thin_layers(result.stack, min_nm):
-        removed = len(_thin_layers(result.stack, min_nm))
-        result = refine(_drop_thin_layers(result.stack, min_nm))
-        history.append({"layers": len(result.stack.layers), "merit": result.merit, "needle": None,
-                        "removed_thin_layers": removed})
-    return result
-
-
-def _advance(update, step: int, result: DesignResult, what: str) -> None:
-    if update is not None:
-        update(step, f"{what}: {len(result.stack.layers)} layers, merit {result.merit:.4g}")
 
 
 # ------------------------------------------------------------------ tolerances and yield

@@ -128,11 +128,8 @@ from layerstack_jax.io import (
     stack_from_dict,
 )
 
-from ._design import (
-    ColourTarget,
-    RobustSpec,
-    SpectralTarget,
-)
+from ._design import RobustSpec
+from ._design_targets import ColourTarget, SpectralTarget
 from ._fit_file import parameter_of
 
 __all__ = ["DesignTarget", "NeedleSettings", "DesignFile", "load_design", "QUANTITY"]

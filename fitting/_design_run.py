@@ -23,15 +23,14 @@ from layerstack_jax import LayerstackError
 
 from ._design import (
     DesignResult,
-    SpectralTarget,
     YieldResult,
-    merit,
-    needle_design,
     optimize_thicknesses,
     thickness_yield,
     with_thicknesses,
 )
 from ._design_file import QUANTITY, DesignFile, DesignTarget
+from ._design_targets import SpectralTarget, merit
+from ._needle import needle_design
 
 __all__ = ["TargetOutcome", "DesignOutcome", "run_design", "design_report", "design_stack_dict", "plot_design"]
 

@@ -33,7 +33,15 @@ from typing import Optional, Union
 
 import numpy as np
 
-from layerstack_jax import Geometry, KubelkaMunk, LayerstackError, Mixture, Paint, Stack, k_over_s
+from layerstack_jax import (
+    Geometry,
+    KubelkaMunk,
+    LayerstackError,
+    Mixture,
+    Paint,
+    Stack,
+    k_over_s,
+)
 
 from ._dataset import Dataset
 from ._objective import Objective

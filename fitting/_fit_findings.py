@@ -60,7 +60,10 @@ def quality_verdict(reduced_chi2: float, dof: int, sigma_given: bool, s: float) 
     below 2/3) is implausible — the model misses the data (or σ is too small), resp. σ is too
     large. Without σ, the χ² computed with σ = 1 says nothing: the verdict states the σ
     estimated from the residuals, ``s``."""
-    from scipy.special import chdtr, chdtrc  # χ² cdf and sf (what scipy.stats.chi2 calls; lighter import)
+    from scipy.special import (  # χ² cdf and sf (what scipy.stats.chi2 calls; lighter import)
+        chdtr,
+        chdtrc,
+    )
 
     if dof <= 0:
         return f"no degrees of freedom (ν = {dof}): χ² cannot judge the fit", [
@@ -116,7 +119,9 @@ def delta_sign_warnings(objective: Objective, args, chi2: float, dof: int, refit
     warning says so. Cost: one extra solve, only for such fits. ``args``: the fit's
     ``(data, weight)``; ``chi2``, ``dof``: the fit's χ² and degrees of freedom; ``refit(args)``:
     the χ² the same fit reaches on other data (:func:`fitting._compiled_fit.refit_chi2`; None: no check)."""
-    from scipy.special import chdtrc  # χ² sf (what scipy.stats.chi2.sf calls; lighter import)
+    from scipy.special import (
+        chdtrc,  # χ² sf (what scipy.stats.chi2.sf calls; lighter import)
+    )
 
     odd = [ds.colour is None and bool(getattr(ds.geometry, "odd_in_delta", False)) for ds in objective.datasets]
     if refit is None or not any(odd) or not objective.sigma_given or dof <= 0 or not np.isfinite(chi2):

@@ -17,9 +17,16 @@ from layerstack_jax import LayerstackError
 
 from ._objective import Objective
 from ._statistics import bound_contacts
-from ._structured import (STRUCTURE_MODES, Structure, find_structure, residuals_with_jacobian,
-                          structured_jacobian_with_statistics, structured_statistics_function, verify_structure,
-                          with_args_tangent)
+from ._structured import (
+    STRUCTURE_MODES,
+    Structure,
+    find_structure,
+    residuals_with_jacobian,
+    structured_jacobian_with_statistics,
+    structured_statistics_function,
+    verify_structure,
+    with_args_tangent,
+)
 
 __all__ = ["HOLD_RTOL", "hold_on_bounds", "jacobian_with_statistics", "dense_jacobian", "structure_for"]
 

@@ -20,6 +20,7 @@ from jaxtyping import Array, Float
 from ._status import ABANDONED, CONVERGED, FAILED, MAX_STEPS, NONFINITE
 from ._structured import StructuredDampedNewtonDescent, block_distance
 
+
 class RoundoffTrustRegion(optx.AbstractSearch):
     """:class:`optimistix.ClassicalTrustRegion` (``region``) that also accepts a step when both
     its predicted and its actual change of the cost are at the round-off level of the cost

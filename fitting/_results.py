@@ -17,11 +17,26 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ._fit_findings import (_non_identifiable, bounds_hit, delta_sign_warnings, identifiability_lines, not_separated,
-                            percent_warnings, quality_verdict, separability_warning, structural_degeneracy)
+from ._fit_findings import (
+    _non_identifiable,
+    bounds_hit,
+    delta_sign_warnings,
+    identifiability_lines,
+    not_separated,
+    percent_warnings,
+    quality_verdict,
+    separability_warning,
+    structural_degeneracy,
+)
 from ._objective import Objective
+from ._statistics import (
+    CORRELATION_LIMIT,
+    SIGMA_DEFAULT,
+    SIGMA_GIVEN,
+    fit_statistics,
+    separability_findings,
+)
 from ._status import CONVERGED, result_message
-from ._statistics import (CORRELATION_LIMIT, SIGMA_DEFAULT, SIGMA_GIVEN, fit_statistics, separability_findings)
 
 __all__ = ["FitResult", "build_result"]
 

@@ -21,7 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax import ColourSpace, Geometry, Layer, LayerstackError, Stack, reflectance
+from layerstack_jax import (
+    ColourSpace,
+    Geometry,
+    Layer,
+    LayerstackError,
+    Stack,
+    reflectance,
+)
 
 from ._cube_store import cube_parameters
 from ._objective import Objective

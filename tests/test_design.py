@@ -19,6 +19,8 @@ from scipy.stats import norm
 
 import layerstack_jax as ls
 from fitting import _design as D
+from fitting import _design_targets as T
+from fitting import _needle as N
 
 INF = np.inf
 
@@ -35,7 +37,7 @@ def test_quarter_wave_single_layer_ar():
     lam0, ns = 550.0, 1.52
     n1 = float(np.real(mgf2(np.array([lam0]))[0]))
     stack = ls.Stack(1.0, [ls.Layer(mgf2, 80.0)], ls.Substrate(ns))
-    target = D.SpectralTarget(jnp.array([lam0]), 0.0, 0.01)
+    target = T.SpectralTarget(jnp.array([lam0]), 0.0, 0.01)
     res = D.optimize_thicknesses(stack, [target], bounds_nm=(0.0, 180.0))
     assert res.converged, res.message
     assert abs(res.thickness_nm[0] - lam0 / (4 * n1)) < 0.1
@@ -56,7 +58,7 @@ def test_quarter_wave_high_reflector_peak_closed_form(pairs):
     stack = ls.Stack(1.0, layers, ls.Substrate(ns))
     Y = (nH / nL) ** (2 * pairs) * nH**2 / ns
     R_closed = ((1 - Y) / (1 + Y)) ** 2
-    R = float(D.SpectralTarget(jnp.array([lam0]), 1.0).evaluate(stack)[0, 0])
+    R = float(T.SpectralTarget(jnp.array([lam0]), 1.0).evaluate(stack)[0, 0])
     assert abs(R - R_closed) < 1e-12
 
 
@@ -66,7 +68,7 @@ def test_design_recovers_quarter_wave_reflector_from_a_perturbed_start():
     qw = np.array([lam0 / (4 * nH), lam0 / (4 * nL), lam0 / (4 * nH)])
     start = qw * np.array([1.15, 0.87, 1.1])
     stack = ls.Stack(1.0, [ls.Layer(n, d) for n, d in zip((nH, nL, nH), start)], ls.Substrate(ns))
-    res = D.optimize_thicknesses(stack, [D.SpectralTarget(jnp.array([lam0]), 1.0, 0.01, kind="above")],
+    res = D.optimize_thicknesses(stack, [T.SpectralTarget(jnp.array([lam0]), 1.0, 0.01, kind="above")],
                                  bounds_nm=(20.0, 150.0))
     assert res.converged, res.message
     assert np.max(np.abs(res.thickness_nm - qw)) < 0.05
@@ -75,15 +77,15 @@ def test_design_recovers_quarter_wave_reflector_from_a_perturbed_start():
 def test_needle_function_is_the_derivative_of_the_merit():
     """Needle function against a one-sided 2nd-order finite difference in the needle thickness."""
     wl = jnp.linspace(450.0, 650.0, 21)
-    target = D.SpectralTarget(wl, 0.0, 0.005)
+    target = T.SpectralTarget(wl, 0.0, 0.005)
     stack = ls.Stack(1.0, [ls.Layer(1.38, 95.6), ls.Layer(2.35, 113.1)], ls.Substrate(1.52))
     materials = [1.38, 2.35]
-    scan = D.needle_function(stack, [target], materials, points_per_layer=4)
+    scan = N.needle_function(stack, [target], materials, points_per_layer=4)
     assert scan.derivative.shape == (2, 1 + 2 * 4)
     h = 1e-3
     for m, p in [(0, 0), (1, 3), (0, 6), (1, 8)]:
         j, f = int(scan.layer[p]), float(scan.fraction[p])
-        M = [float(D.merit(D._split_with_needle(stack, j, f, materials[m], k * h), [target])) for k in range(3)]
+        M = [float(T.merit(N._split_with_needle(stack, j, f, materials[m], k * h), [target])) for k in range(3)]
         fd = (-3 * M[0] + 4 * M[1] - M[2]) / (2 * h)
         assert abs(scan.derivative[m, p] - fd) <= 1e-5 * max(1.0, abs(fd))
 
@@ -93,12 +95,12 @@ def test_broadband_ar_with_database_materials_and_needles():
     (database); needles improve the 2-layer start. R of the final design checked with tmm."""
     sio2, tio2 = ls.material("SiO2", "Malitson"), ls.material("TiO2", "Devore-o")
     wl = jnp.linspace(450.0, 650.0, 21)
-    target = D.SpectralTarget(wl, 0.0, 0.005)
+    target = T.SpectralTarget(wl, 0.0, 0.005)
     start = ls.Stack(1.0, [ls.Layer(sio2, 100.0), ls.Layer(tio2, 100.0)], ls.Substrate(1.52))
     # host L-BFGS-B: one compile of merit + gradient per layout instead of one jaxopt solver
     # each (the jaxopt path is exercised by the other tests of this file)
     two = D.optimize_thicknesses(start, [target], bounds_nm=(0.0, 400.0), method="scipy")
-    result, history = D.needle_design(start, [target], [sio2, tio2], iterations=2, max_layers=6,
+    result, history = N.needle_design(start, [target], [sio2, tio2], iterations=2, max_layers=6,
                                       bounds_nm=(0.0, 400.0), points_per_layer=16, method="scipy")
     assert len(result.stack.layers) <= 6
     assert result.merit < 0.5 * two.merit  # the needles helped
@@ -135,7 +137,7 @@ def test_colour_target_dielectric_metal_dielectric():
 
     # a colour this stack can show (computed with colour-science), approached from elsewhere
     target_lab = lab_colour_science(teapot(180.0, 320.0))
-    target = D.ColourTarget(cs, target_lab, 0.0, tolerance=0.5)
+    target = T.ColourTarget(cs, target_lab, 0.0, tolerance=0.5)
     res = D.optimize_thicknesses(teapot(250.0, 250.0), [target], free=[0, 2], bounds_nm=(50.0, 600.0),
                                  n_starts=16, seed=1)
     lab = lab_colour_science(res.stack)
@@ -149,7 +151,7 @@ def test_yield_matches_gaussian_probability_from_tmm():
     n1, ns, lam, Rmax, sigma = 1.38, 1.52, 550.0, 0.0127, 3.0
     d0 = lam / (4 * n1)
     stack = ls.Stack(1.0, [ls.Layer(n1, d0)], ls.Substrate(ns))
-    spec = D.SpectralTarget(jnp.array([lam]), Rmax, 1e-9, kind="below")
+    spec = T.SpectralTarget(jnp.array([lam]), Rmax, 1e-9, kind="below")
 
     def excess(delta):
         return _tmm_R([1.0, n1, ns], [INF, d0 + delta, INF], lam) - Rmax
@@ -166,7 +168,7 @@ def test_robust_design_lowers_the_expected_merit():
     """Optimising the expected merit under 3 nm errors gives a design whose expected merit (on
     fresh draws) is lower than that of the nominal optimum."""
     wl = jnp.linspace(450.0, 650.0, 11)
-    target = D.SpectralTarget(wl, 0.0, 0.005)
+    target = T.SpectralTarget(wl, 0.0, 0.005)
     stack = ls.Stack(1.0, [ls.Layer(1.38, 95.0), ls.Layer(2.1, 30.0), ls.Layer(1.38, 90.0)], ls.Substrate(1.52))
     errors = D.RobustSpec(sigma_nm=3.0, samples=32, seed=0)
     nominal = D.optimize_thicknesses(stack, [target], bounds_nm=(0.0, 300.0))
@@ -180,15 +182,15 @@ def test_robust_design_lowers_the_expected_merit():
 def test_bad_design_input():
     wl = jnp.array([500.0, 600.0])
     stack = ls.Stack(1.0, [ls.Layer(1.38, 100.0)], ls.Substrate(1.52))
-    ok = D.SpectralTarget(wl, 0.0)
+    ok = T.SpectralTarget(wl, 0.0)
     with pytest.raises(ls.LayerstackError, match="tolerance"):
-        D.SpectralTarget(wl, 0.0, 0.0)
+        T.SpectralTarget(wl, 0.0, 0.0)
     with pytest.raises(ls.LayerstackError, match="quantity"):
-        D.SpectralTarget(wl, 0.0, quantity="X")
+        T.SpectralTarget(wl, 0.0, quantity="X")
     with pytest.raises(ls.LayerstackError, match="angle_deg"):
-        D.SpectralTarget(wl, 0.0, angle_deg=95.0)
+        T.SpectralTarget(wl, 0.0, angle_deg=95.0)
     with pytest.raises(ls.LayerstackError, match="broadcast"):
-        D.SpectralTarget(wl, np.zeros(3))
+        T.SpectralTarget(wl, np.zeros(3))
     with pytest.raises(ls.LayerstackError, match="inverted"):
         D.optimize_thicknesses(stack, [ok], bounds_nm=(200.0, 100.0))
     with pytest.raises(ls.LayerstackError, match="out of range"):
@@ -196,7 +198,7 @@ def test_bad_design_input():
     with pytest.raises(ls.LayerstackError, match="outside the bounds"):
         D.optimize_thicknesses(stack, [ok], bounds_nm=(0.0, 50.0))
     with pytest.raises(ls.LayerstackError, match="at least one target"):
-        D.merit(stack, [])
+        T.merit(stack, [])
 
 
 # ------------------------------------------------------------------ issue 18, row 10
@@ -205,7 +207,7 @@ def _readme_needle_case():
     sio2, tio2 = ls.material("SiO2", "Malitson"), ls.material("TiO2", "Devore-o")
     wl = jnp.linspace(450.0, 650.0, 27)
     stack = ls.Stack(1.0, [ls.Layer(sio2, 100.0), ls.Layer(tio2, 100.0)], ls.Substrate(1.52))
-    return stack, [D.SpectralTarget(wl, 0.0, 0.005)], [sio2, tio2]
+    return stack, [T.SpectralTarget(wl, 0.0, 0.005)], [sio2, tio2]
 
 
 def _thin(stack, min_nm):
@@ -216,7 +218,7 @@ def test_min_thickness_holds_on_the_final_design():
     """A refined design that still holds layers of 0.16 and 0.67 nm (what the user got with
     min_thickness_nm = 0.5): the final design drops them and is refined again."""
     wl = jnp.linspace(450.0, 650.0, 5)
-    targets = [D.SpectralTarget(wl, 0.0, 0.005)]
+    targets = [T.SpectralTarget(wl, 0.0, 0.005)]
     thin = ls.Stack(1.0, [ls.Layer(1.46, 90.0), ls.Layer(2.35, 0.16), ls.Layer(1.46, 0.67), ls.Layer(2.35, 20.0)],
                     ls.Substrate(1.52))
 
@@ -225,7 +227,7 @@ def test_min_thickness_holds_on_the_final_design():
 
     history = []
     start = refine(thin)._replace(stack=thin)
-    final = D._enforce_min_thickness(start, 0.5, refine, history)
+    final = N._enforce_min_thickness(start, 0.5, refine, history)
     assert not _thin(final.stack, 0.5)
     assert len(final.stack.layers) <= 3 and history and history[0]["removed_thin_layers"] >= 1
 
@@ -235,7 +237,7 @@ def test_needle_design_shows_progress_and_keeps_min_thickness(capsys):
     layer thinner than min_thickness_nm in the result."""
     wl = jnp.linspace(450.0, 650.0, 9)
     stack = ls.Stack(1.0, [ls.Layer(1.46, 100.0), ls.Layer(2.35, 100.0)], ls.Substrate(1.52))
-    result, history = D.needle_design(stack, [D.SpectralTarget(wl, 0.0, 0.005)], [1.46, 2.35], iterations=1,
+    result, history = N.needle_design(stack, [T.SpectralTarget(wl, 0.0, 0.005)], [1.46, 2.35], iterations=1,
                                       points_per_layer=4, bounds_nm=(0.0, 400.0), min_thickness_nm=0.5,
                                       method="scipy")
     assert not _thin(result.stack, 0.5)
@@ -250,7 +252,7 @@ def test_needle_design_readme_call_as_the_user_made_it(capsys):
     points per layer): minutes of compilation, now with a progress bar, and the final design
     keeps min_thickness_nm."""
     stack, targets, materials = _readme_needle_case()
-    result, _ = D.needle_design(stack, targets, materials)
+    result, _ = N.needle_design(stack, targets, materials)
     assert not _thin(result.stack, 0.5)
     assert "needle design" in capsys.readouterr().err
 
@@ -265,13 +267,13 @@ def test_targets_at_oblique_angles_are_evaluated_at_those_angles():
     stack = ls.Stack(1.0, [ls.Layer(2.1, 70.0), ls.Layer(1.38, 95.0)], ls.Substrate(1.52))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no "radians given?" warning
-        R = np.asarray(D.SpectralTarget(jnp.asarray(wl), 0.0, 0.01, angle_deg=angles).evaluate(stack))
+        R = np.asarray(T.SpectralTarget(jnp.asarray(wl), 0.0, 0.01, angle_deg=angles).evaluate(stack))
     ref = np.array([[_tmm_R([1.0, 2.1, 1.38, 1.52], [INF, 70.0, 95.0, INF], lam, math.radians(a)) for lam in wl]
                     for a in angles])
     np.testing.assert_allclose(R, ref, rtol=1e-12)
     # the colour target too: CIELAB of tmm's reflectance at 45°
     cs = ls.ColourSpace(np.linspace(380.0, 780.0, 41))
-    lab = np.asarray(D.ColourTarget(cs, np.zeros(3), 45.0).evaluate(stack))[0]
+    lab = np.asarray(T.ColourTarget(cs, np.zeros(3), 45.0).evaluate(stack))[0]
     R45 = np.array([_tmm_R([1.0, 2.1, 1.38, 1.52], [INF, 70.0, 95.0, INF], lam, math.radians(45.0))
                     for lam in np.asarray(cs.wavelength_nm)])
     np.testing.assert_allclose(lab, np.asarray(cs.Lab(jnp.asarray(R45))), atol=1e-9)

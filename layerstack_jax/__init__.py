@@ -11,9 +11,9 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
-from ._instruments.batched import MEMORY_FRACTION as MEMORY_FRACTION
-from ._instruments.batched import MemoryBudget as MemoryBudget
-from ._instruments.batched import memory_budget as memory_budget
+from ._base.memory import MEMORY_FRACTION as MEMORY_FRACTION
+from ._base.memory import MemoryBudget as MemoryBudget
+from ._base.memory import memory_budget as memory_budget
 from ._instruments.batched import predict as predict
 from ._appearance.coated_rough import CoatedRough as CoatedRough
 from ._appearance.coated_rough import coated_rough as coated_rough

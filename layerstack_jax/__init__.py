@@ -11,9 +11,9 @@ exp(−iωt)). The package never changes ``jax_enable_x64``: enable float64 your
 interference-grade accuracy (see README, "Precision").
 """
 
-from ._instruments.batched import MEMORY_FRACTION as MEMORY_FRACTION
-from ._instruments.batched import MemoryBudget as MemoryBudget
-from ._instruments.batched import memory_budget as memory_budget
+from ._base.memory import MEMORY_FRACTION as MEMORY_FRACTION
+from ._base.memory import MemoryBudget as MemoryBudget
+from ._base.memory import memory_budget as memory_budget
 from ._instruments.batched import predict as predict
 from ._appearance.coated_rough import CoatedRough as CoatedRough
 from ._appearance.coated_rough import coated_rough as coated_rough
@@ -39,13 +39,13 @@ from ._media.database import material as material
 from ._media.database import material_sources as material_sources
 from ._media.effective_medium import Bruggeman as Bruggeman
 from ._media.effective_medium import Looyenga as Looyenga
-from ._instruments.ellipsometry import Ellipsometric as Ellipsometric
+from ._instruments.ellipsometer import Ellipsometric as Ellipsometric
 from ._instruments.ellipsometry import Ellipsometry as Ellipsometry
 from ._instruments.ellipsometry import ellipsometry as ellipsometry
 from ._instruments.ellipsometry import psi_delta as psi_delta
 from ._instruments.ellipsometry import reflection_amplitudes as reflection_amplitudes
-from ._instruments.ellipsometry import SharedReadings as SharedReadings
-from ._instruments.ellipsometry import shared_readings as shared_readings
+from ._instruments.ellipsometer import SharedReadings as SharedReadings
+from ._instruments.ellipsometer import shared_readings as shared_readings
 from ._kernels.fresnel import fresnel_amplitudes as fresnel_amplitudes
 from ._kernels.fresnel import normal_wavevector as normal_wavevector
 from ._appearance.he_torrance import HeTorrance as HeTorrance

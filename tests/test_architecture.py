@@ -28,7 +28,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("layerstack_jax", "fitting", "layerstack_cli", "benchmarks")
 GEOMETRY_CLASSES = {"Sphere": "sphere.py", "Directional": "directional.py", "BRDF": "directional.py",
-                    "Specular": "specular.py", "Ellipsometric": "ellipsometry.py"}
+                    "Specular": "specular.py", "Ellipsometric": "ellipsometer.py"}
 
 
 def _modules(package: str) -> dict[str, Path]:

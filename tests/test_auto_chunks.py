@@ -1,7 +1,7 @@
 """``chunk="auto"``: sizes chosen from the memory available where the work runs.
 
 :func:`layerstack_jax.predict` sizes its vmapped block and :func:`fitting.fit_cube` its regions
-from a memory budget (:func:`layerstack_jax._instruments.batched.memory_budget`: a Dask worker's memory
+from a memory budget (:func:`layerstack_jax._base.memory.memory_budget`: a Dask worker's memory
 limit, else this process's available memory) and the memory measured on the compiled program.
 Checked here: "auto" resolves to concrete sizes that shrink with the budget and give the same
 numbers as those sizes given explicitly; a budget too small for one block is a LayerstackError
@@ -22,7 +22,8 @@ import pytest
 import fitting
 import layerstack_jax as ls
 from layerstack_jax._instruments import batched as _batched
-from layerstack_jax._instruments.batched import MemoryBudget, memory_budget, predict
+from layerstack_jax._base.memory import MemoryBudget, memory_budget
+from layerstack_jax._instruments.batched import predict
 
 WL = np.linspace(400.0, 700.0, 31)
 GEOMETRY = ls.Specular(8.0, "R")

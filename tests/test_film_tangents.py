@@ -22,6 +22,7 @@ import pytest
 
 import layerstack_jax as ls
 from layerstack_jax._kernels import coherent as _coherent
+from layerstack_jax._kernels import coherent_derivatives as _derivatives
 from _helpers import relative_error
 
 WL = jnp.array([400.0, 533.0, 650.0, 780.0])
@@ -115,8 +116,9 @@ def _with_plain_rouard(monkeypatch, fn, *args):
     """``fn()`` with the library's ``_rouard`` swapped for :func:`_plain_rouard`, every packet
     taking the derivative rule that calls it (beyond ``_SCAN_THRESHOLD`` films the library uses a
     loop-form rule of its own, which would otherwise be compared with itself)."""
-    monkeypatch.setattr(_coherent, "_rouard", _plain_rouard)
-    monkeypatch.setattr(_coherent, "_SCAN_THRESHOLD", 10 ** 6)
+    for module in (_coherent, _derivatives):  # the forward's packets and the stored-coefficient rule
+        monkeypatch.setattr(module, "_rouard", _plain_rouard)
+        monkeypatch.setattr(module, "_SCAN_THRESHOLD", 10 ** 6)
     try:
         return fn(*args)
     finally:

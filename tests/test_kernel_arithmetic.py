@@ -1,4 +1,4 @@
-"""The coherent kernel's own forms of XLA operations (``_coherent._cos_sin``,
+"""The coherent kernel's own forms of XLA operations (``_cos_sin._cos_sin``,
 ``_fresnel._forward_sqrt``, ``_fresnel.divide``): equal to numpy's to a few ulp, the branch of
 the square root, exact special values, derivatives."""
 
@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from layerstack_jax._kernels.coherent import _cos_sin
+from layerstack_jax._kernels.cos_sin import _cos_sin
 from layerstack_jax._kernels.fresnel import _forward_sqrt, divide
 
 

@@ -1,5 +1,5 @@
 """The derivative of a coherent packet (``_coherent._packet``, a custom JVP in the loop form of
-its forward: ``_packet_sweep``) against JAX's own derivative of a plain packet written out here
+its forward: ``_derivatives._packet_sweep``) against JAX's own derivative of a plain packet written out here
 (:func:`_plain_packet`: ``jnp.sqrt``, the Fresnel formulas, ``jnp.exp`` and complex division,
 no custom rule): values to 1e-13, forward and reverse derivatives to 1e-12, for every kind of
 tangent alone and all together, from one film to eleven (short packets by both rules), with an opaque
@@ -17,6 +17,7 @@ import pytest
 
 import layerstack_jax as ls
 from layerstack_jax._kernels import coherent as _coherent
+from layerstack_jax._kernels import coherent_derivatives as _derivatives
 from layerstack_jax._kernels.fresnel import reciprocal
 from _helpers import relative_error
 
@@ -85,7 +86,8 @@ def path(request, monkeypatch):
     """Short packets take the stored-coefficient rule by default; "sweep" forces the loop form
     (``_packet_jvp_sweep``) for any number of films."""
     if request.param == "sweep":
-        monkeypatch.setattr(_coherent, "_SCAN_THRESHOLD", 0)
+        for module in (_coherent, _derivatives):  # the forward's loops and the rule's choice of form
+            monkeypatch.setattr(module, "_SCAN_THRESHOLD", 0)
     return request.param
 
 

@@ -153,3 +153,15 @@ def test_kubelka_munk_fit_runner_tiny(tmp_path):
     assert res["ours_float64"]["converged"] == 6 and res["yardstick"]["success"] == 2
     assert max(res["yardstick"]["max_abs_diff_over_sigma_vs_ours"]) <= 1e-2
     assert "yardstick: NumPy + scipy" in (tmp_path / "kubelka_munk_fit.md").read_text()
+
+
+@pytest.mark.slow
+def test_derivative_modes_runner_tiny(tmp_path):
+    """Every mode's table row is written, each ratio finite and positive (a few samples)."""
+    from benchmarks import derivative_modes
+
+    out = tmp_path / "modes.md"
+    assert derivative_modes.main(["--rounds", "1", "--p2-batch", "2", "--p3-batch", "8", "--out", str(out)]) == 0
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| ") and "ms" not in line]
+    assert len(rows) == len(derivative_modes.ROWS)
+    assert all(float(r.split("|")[3]) > 0 and float(r.split("|")[5]) > 0 for r in rows)

@@ -198,7 +198,7 @@ def _screen(objective: Objective, data):
 
 
 class LookupTable:
-    """Model spectra of an objective at ``size`` points of its parameter box, for starting each of
+    r"""Model spectra of an objective at ``size`` points of its parameter box, for starting each of
     many fits near its own optimum (``fit_batch(..., start="lookup")``).
 
     The points are those of a multi-start (:func:`fitting._multistart.multistart_points`: the

@@ -57,7 +57,7 @@ GIVE_UP_MIN_STEPS, GIVE_UP_STEPS, GIVE_UP_COST = 32, 3, 10.0
 
 
 def give_up_rule(best_cost: float, best_steps: int) -> tuple:
-    """``(steps, cost)`` of :meth:`fitting._least_squares.LevenbergMarquardt.terminate` for a start solved after a
+    r"""``(steps, cost)`` of :meth:`fitting._least_squares.LevenbergMarquardt.terminate` for a start solved after a
     converged start of cost :math:`\tfrac12\|r\|^2` = ``best_cost`` found in ``best_steps``
     steps (:data:`GIVE_UP_MIN_STEPS`, :data:`GIVE_UP_STEPS`, :data:`GIVE_UP_COST`); :data:`fitting._solver_options.NEVER`
     while no start has converged.
@@ -73,7 +73,7 @@ def give_up_rule(best_cost: float, best_steps: int) -> tuple:
 
 
 def _cost(out: FitOutput) -> np.ndarray:
-    """:math:`\tfrac12\|r\|^2` (data and penalty residuals) of NumPy fit output(s)."""
+    r""":math:`\tfrac12\|r\|^2` (data and penalty residuals) of NumPy fit output(s)."""
     lead = np.shape(out.status)
     data = sum(np.sum(np.asarray(r, float).reshape(lead + (-1,)) ** 2, axis=-1) for r in out.residuals)
     return 0.5 * (data + np.sum(np.asarray(out.penalty, float).reshape(lead + (-1,)) ** 2, axis=-1))

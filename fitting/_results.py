@@ -54,7 +54,7 @@ def _mask(objective: Objective) -> tuple:
 
 @dataclasses.dataclass
 class FitResult:
-    """Outcome of :func:`~fitting.fit`.
+    r"""Outcome of :func:`~fitting.fit`.
 
     Attributes:
         values: ``{name: coefficients}`` (shapes as the parameter: ``()``, ``(m,)``,

@@ -57,7 +57,7 @@ class Annotation(NamedTuple):
 
 
 def annotated(where: FileLocation, key: str, spec, path: tuple, kind: str, annotations: Optional[list], *,
-               spectral: bool, name: Optional[str] = None, value_range: Optional[tuple] = None):
+              spectral: bool, name: Optional[str] = None, value_range: Optional[tuple] = None):
     """The plain value spec of ``spec``: itself, or, when it is a table with fitting words
     (``{ value = ..., free = true, ... }``; for spectra the spectrum's own keys may stand for
     ``value``), its value — the words are recorded in ``annotations`` (when a list) as an

@@ -36,7 +36,7 @@ __all__ = ["MODELS", "MIXTURES", "NEGATIVE_RTOL", "read_material", "read_spectru
 #: (one per oscillator) or a free-parameter table: ``n = { tauc_lorentz = { Eg = 3.2, A = {
 #: value = 150, free = true, min = 10, max = 500 }, E0 = 4.2, C = 1.5, eps_inf = 2.2 } }``.
 MODELS = {"lorentz": Lorentz, "drude": Drude, "tauc_lorentz": TaucLorentz, "cody_lorentz": CodyLorentz,
-           "cauchy_urbach": CauchyUrbach}
+          "cauchy_urbach": CauchyUrbach}
 #: Effective media read by name: ``n = { bruggeman = { materials = [<n>, <n>], fractions = 0.5 } }``,
 #: each constituent written as ``n`` is (a number, a dispersion table, ``{ material = ... }``) or as
 #: ``{ n = ..., k = ... }``; ``fractions`` as the class's (first m − 1 materials; the last fills the rest).

@@ -37,6 +37,8 @@ _BACKGROUND_KEYS = ("n", "rho_g")
 _AMBIENT_KEYS = ("n",)
 _KUBELKA_MUNK_KEYS = ("n", "thickness_nm", "ground_reflectance", "K_per_nm", "S_per_nm", "pigments")
 _PIGMENT_KEYS = ("name", "K_per_nm", "S_per_nm", "concentration")
+
+
 def _layer(where: FileLocation, table: Mapping, base_dir: Path, name: str, index: int = 0, annotations: Optional[list] = None) -> Layer:
     reject_unknown_keys(where, table, _LAYER_KEYS)
     if "thickness_nm" not in table:

@@ -70,7 +70,7 @@ QUANTITIES = ("psi", "delta", "N", "C", "S", "rho_re", "rho_im", "depolarization
 
 
 class Ellipsometric(Geometry):
-    """An ellipsometer's reading at ``angle_deg`` (degrees), as a measurement geometry: lets
+    r"""An ellipsometer's reading at ``angle_deg`` (degrees), as a measurement geometry: lets
     ψ/Δ spectra be fitted (``fitting.Dataset(Ellipsometric(70, "psi"), data)``).
 
     ``quantity`` (one per dataset; "Fitting ellipsometric data" in the module docstring):

@@ -124,7 +124,7 @@ class Geometry(eqx.Module):
         return np.asarray(wavelength_nm, dtype=float)
 
 class OpticalGeometry(Geometry):
-    """A geometry read through the fixed :class:`~layerstack_jax.Optics` (abstract): the
+    r"""A geometry read through the fixed :class:`~layerstack_jax.Optics` (abstract): the
     spectrophotometers — sphere, 45°/0°, BRDF, specular.
 
     * :meth:`optics` — the Optics it needs for a resolved stack (the Fresnel algebra at its

@@ -164,7 +164,7 @@ def _cells(cos_o: np.ndarray, phi: np.ndarray, split: int = 1):
 
 
 def _cell_weights(cos_o: np.ndarray, phi: np.ndarray, table: np.ndarray, mu_edges, phi_edges) -> np.ndarray:
-    """:math:`\int_\text{cell} k_d \cos\theta_o\, d\omega` per cell (both azimuth signs), by the
+    r""":math:`\int_\text{cell} k_d \cos\theta_o\, d\omega` per cell (both azimuth signs), by the
     midpoint rule: ``table`` ``(B, P, ...)`` (grids padded to two nodes) → ``(Cb, Cp, ...)``."""
     mu_c = 0.5 * (mu_edges[1:] + mu_edges[:-1])
     phi_c = 0.5 * (phi_edges[1:] + phi_edges[:-1])
@@ -176,7 +176,7 @@ def _cell_weights(cos_o: np.ndarray, phi: np.ndarray, table: np.ndarray, mu_edge
 
 
 def _lobe_distribution(cos_o: np.ndarray, phi: np.ndarray, kd_mean: np.ndarray) -> _LobeDistribution:
-    """Piecewise-constant sampling densities of :math:`\bar k_d \cos\theta_o` per incidence node
+    r"""Piecewise-constant sampling densities of :math:`\bar k_d \cos\theta_o` per incidence node
     (``kd_mean``: ``(A, B, P)``), with cells from :func:`_cells`; the value in a cell is the
     λ-mean BRDF at its centre (bilinear, clamped) times its mean cos θo."""
     mu_edges, phi_edges = _cells(cos_o, phi, SPLIT)
@@ -201,7 +201,7 @@ def _lobe_distribution(cos_o: np.ndarray, phi: np.ndarray, kd_mean: np.ndarray) 
 
 
 def _albedo(cos_o: np.ndarray, phi: np.ndarray, k_d: np.ndarray) -> np.ndarray:
-    """Directional albedo :math:`\int k_d\cos\theta_o d\omega` per incidence node and wavelength,
+    r"""Directional albedo :math:`\int k_d\cos\theta_o d\omega` per incidence node and wavelength,
     ``(A, L)`` (midpoint rule on the sampling cells)."""
     mu_edges, phi_edges = _cells(cos_o, phi)
     cos_o, k_d = _padded(cos_o, k_d, 1)

@@ -199,3 +199,14 @@ def test_cli_keeps_compiled_programs_on_disk(tmp_path):
     off = tmp_path / "off"
     run(tmp_path / "3.json", "")
     assert not off.exists()
+
+
+def test_a_list_value_without_per_sample_is_refused_by_every_loader(tmp_path):
+    """``value = [a, b]`` is one value per sample; without ``per_sample = true`` a prediction would
+    otherwise read the first number and say nothing."""
+    f = tmp_path / "s.toml"
+    f.write_text(STACK.format(alpha="2e-5").replace("{ value = 8000, free = true, min = 0, max = 1e5 }",
+                                                    "{ value = [8000, 9000], free = true }"))
+    for load in (load_stack, ft.load_fit_parameters):
+        with pytest.raises(ls.LayerstackError, match=r"one value per sample: add per_sample = true"):
+            load(f)

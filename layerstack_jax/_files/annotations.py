@@ -74,6 +74,9 @@ def annotated(where: FileLocation, key: str, spec, path: tuple, kind: str, annot
         if isinstance(plain, list) and not spectral:
             if not plain or not all(is_number(v) for v in plain):
                 raise where.error(f"value must be a number, or a list of numbers (one per sample), got {plain!r}", key)
+            if words.get("per_sample") is not True:  # else a prediction would silently take the first
+                raise where.error(f"value = [...] gives one value per sample: add per_sample = true (got {plain!r})",
+                                  key)
             listed, plain = list(plain), plain[0]  # the stack itself holds one value: the first sample's
         elif not is_number(plain):
             raise where.error(f"value must be a number{'' if spectral else ', or a list of numbers (one per sample, with per_sample = true)'}, got {plain!r}", key)
